@@ -1,0 +1,141 @@
+"""Aircraft parameters (Tempest UAS), coordinated-turn bank angle and the thrust / energy model.
+
+Sources (see ``shared/design/physics.md`` and the README):
+
+* Tempest UAS: Roadman, Elston, Argrow, Frew, "Mission performance of the Tempest unmanned aircraft
+  system in supercell storms", J. Aircraft 49(6), 2012 -- mass 6.40 kg, wing area 0.668 m^2,
+  aspect ratio 16.5 (span 3.32 m).
+* Oswald factor 0.60: Raymer's estimate ``e = 1.78 (1 - 0.045 AR^0.68) - 0.64`` for AR 16.5.
+* C_D0 = 0.015 (published Tempest-class range 0.011-0.019).
+* eta_ec = 0.8, eta_p = 1.0: the paper (Ryu et al.), section III-C.
+* Coordinated turn ``tan(phi) = v_a chi_dot / g``: Beard & McLain, *Small Unmanned Aircraft*, 2012,
+  eq. 9.15 (still-air approximation).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from soaring_env._validation import check_choice, check_positive, check_range
+from soaring_env.physics.atmosphere import G, _density
+
+THRUST_MODELS = ("trim", "paper")
+
+
+@dataclass(frozen=True)
+class Aircraft:
+    """Point-mass aircraft with a parabolic drag polar; defaults are the Tempest UAS.
+
+    :param mass: take-off mass [kg].
+    :param wing_area: reference wing area S [m^2].
+    :param aspect_ratio: wing aspect ratio AR [-].
+    :param oswald: Oswald span efficiency e [-].
+    :param cd0: zero-lift drag coefficient C_D0 [-].
+    :param cl0: fixed lift coefficient of the ``"paper"`` thrust model [-]; 0.5 is an assumption
+        (the paper gives no value): the Tempest's trim C_L lies between 0.38 (20 m/s) and 1.5 (10 m/s).
+    :param eta_ec: energy-source-to-shaft efficiency [-] (paper: 0.8).
+    :param eta_p: propeller efficiency [-] (paper: 1.0).
+    :param thrust_model: ``"trim"`` (default, lift balances weight in the coordinated turn) or
+        ``"paper"`` (the paper's literal equations with a fixed C_L0).
+    :param stall_speed: reported stall speed [m/s]; informative only (the paper's 10 m/s
+        primitives fly below it).
+    """
+
+    mass: float = 6.40
+    wing_area: float = 0.668
+    aspect_ratio: float = 16.5
+    oswald: float = 0.60
+    cd0: float = 0.015
+    cl0: float = 0.5
+    eta_ec: float = 0.8
+    eta_p: float = 1.0
+    thrust_model: str = "trim"
+    stall_speed: float = 11.0
+
+    def __post_init__(self) -> None:
+        for name in ("mass", "wing_area", "aspect_ratio", "oswald", "cl0", "stall_speed"):
+            check_positive(name, getattr(self, name))
+        check_range("oswald", self.oswald, 0.0, 1.0, low_open=True)
+        check_range("cd0", self.cd0, 0.0, 1.0)
+        check_range("eta_ec", self.eta_ec, 0.0, 1.0, low_open=True)
+        check_range("eta_p", self.eta_p, 0.0, 1.0, low_open=True)
+        check_choice("thrust_model", self.thrust_model, THRUST_MODELS)
+
+    @property
+    def weight(self) -> float:
+        """Weight m g [N]."""
+        return self.mass * G
+
+    @property
+    def span(self) -> float:
+        """Wing span sqrt(AR S) [m]."""
+        return math.sqrt(self.aspect_ratio * self.wing_area)
+
+    def packed(self) -> np.ndarray:
+        """Parameters as the float64 vector the compiled kernels read (order: see ``_AC_*``)."""
+        return np.array(
+            [
+                self.mass,
+                self.wing_area,
+                math.pi * self.aspect_ratio * self.oswald,
+                self.cd0,
+                self.cl0,
+                self.eta_ec * self.eta_p,
+                0.0 if self.thrust_model == "trim" else 1.0,
+            ],
+            dtype=np.float64,
+        )
+
+    def thrust(self, airspeed, gamma, bank, height) -> np.ndarray:
+        """Required thrust [N] for steady flight (clipped at 0: no regeneration).
+
+        :param airspeed: v_a [m/s]; :param gamma: flight path angle [rad];
+        :param bank: bank angle phi [rad]; :param height: height [m] (for the ISA density).
+        """
+        v, g_, p, h = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (airspeed, gamma, bank, height)))
+        out = np.empty(v.shape)
+        ac = self.packed()
+        for i in np.ndindex(v.shape):
+            out[i] = _thrust(v[i], g_[i], math.cos(p[i]), h[i], ac)
+        return out
+
+    def fuel_power(self, airspeed, gamma, bank, height) -> np.ndarray:
+        """Specific fuel power ``T v_a / (m eta_ec eta_p)`` [W/kg] = [J/(kg s)]."""
+        t = self.thrust(airspeed, gamma, bank, height)
+        return t * np.asarray(airspeed, dtype=np.float64) / (self.mass * self.eta_ec * self.eta_p)
+
+
+def bank_angle(airspeed, chi_dot) -> np.ndarray:
+    """Bank angle of the coordinated turn ``phi = atan(v_a chi_dot / g)`` [rad].
+
+    :param airspeed: v_a [m/s]; :param chi_dot: course rate [rad/s].
+    """
+    return np.arctan(np.asarray(airspeed, dtype=np.float64) * np.asarray(chi_dot, dtype=np.float64) / G)
+
+
+# Indices into Aircraft.packed(); kept next to the kernels that read them.
+_AC_MASS, _AC_S, _AC_PIARE, _AC_CD0, _AC_CL0, _AC_ETA, _AC_MODEL = range(7)
+
+
+@njit(cache=True, inline="always")
+def _thrust(v: float, gamma: float, cos_phi: float, h: float, ac: np.ndarray) -> float:
+    """Steady-flight thrust [N], clipped at zero; see :meth:`Aircraft.thrust`."""
+    qs = 0.5 * _density(h) * v * v * ac[_AC_S]
+    w = ac[_AC_MASS] * G
+    if ac[_AC_MODEL] == 0.0:
+        # "trim": dgamma/dt = 0 in the coordinated turn -> L = m g cos(gamma) / cos(phi).
+        cl = w * math.cos(gamma) / (cos_phi * qs)
+        drag = qs * (ac[_AC_CD0] + cl * cl / ac[_AC_PIARE])
+        t = drag + w * math.sin(gamma)
+    else:
+        # "paper": fixed C_L0, T_x = D + m g sin(gamma), T_z = L - m g cos(gamma)/cos(phi).
+        cl = ac[_AC_CL0]
+        drag = qs * (ac[_AC_CD0] + cl * cl / ac[_AC_PIARE])
+        tx = drag + w * math.sin(gamma)
+        tz = qs * cl - w * math.cos(gamma) / cos_phi
+        t = math.sqrt(tx * tx + tz * tz)
+    return t if t > 0.0 else 0.0

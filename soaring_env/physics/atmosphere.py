@@ -1,0 +1,39 @@
+"""International Standard Atmosphere (troposphere) and physical constants."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+#: Standard gravity [m/s^2] (ISO 80000-3).
+G = 9.80665
+#: ISA sea-level density [kg/m^3], temperature [K] and lapse rate [K/m] (ISO 2533:1975).
+RHO0 = 1.225
+T0 = 288.15
+LAPSE = 0.0065
+#: ISA troposphere density exponent g / (R L) - 1 with R = 287.053 J/(kg K).
+ISA_EXPONENT = 4.2559
+
+
+@njit(cache=True, inline="always")
+def _density(h: float) -> float:
+    return RHO0 * (1.0 - LAPSE * h / T0) ** ISA_EXPONENT
+
+
+@njit(cache=True)
+def _density_many(h: np.ndarray, out: np.ndarray) -> None:
+    for i in range(h.size):
+        out.flat[i] = _density(h.flat[i])
+
+
+def air_density(height: np.ndarray | float) -> np.ndarray:
+    """ISA troposphere air density ``rho(h) = 1.225 (1 - 0.0065 h / 288.15)^4.2559`` [kg/m^3].
+
+    :param height: geometric height above mean sea level [m], valid below 11 km.
+    """
+    h = np.asarray(height, dtype=np.float64)
+    if np.any(h >= 11000.0) or not np.all(np.isfinite(h)):
+        raise ValueError(f"height={height!r} must be finite and below 11000 m (ISA troposphere)")
+    out = np.empty_like(h)
+    _density_many(h, out)
+    return out

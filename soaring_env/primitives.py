@@ -1,0 +1,376 @@
+"""The paper's 174 motion primitives and the one rollout function of the project.
+
+Every propagation in soaring-env -- the Gymnasium envs, the SST planner, the benchmarks and the
+plots -- goes through :func:`rollout`. It integrates the paper's 4-DOF kinematics (eqs. 2-5)
+
+    dPn/dt = v_a cos(chi) cos(gamma) + w_n     dchi/dt = chi_dot
+    dPe/dt = v_a sin(chi) cos(gamma) + w_e     dh/dt   = v_a sin(gamma) + w_up(Pn, Pe, h, t)
+
+for piecewise-constant controls. The horizontal motion is the exact circle-arc / line closed form
+plus the wind drift; only the updraft term is integrated numerically (classical RK4 with substeps of
+at most ``max_substep`` seconds, and only where the path is within a thermal's reach -- elsewhere the
+updraft is exactly zero and the height is linear in time).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit
+
+from soaring_env._validation import ConfigError, check_array_finite, check_int, check_positive
+from soaring_env.physics.aircraft import _AC_ETA, _AC_MASS, Aircraft, _thrust
+from soaring_env.physics.atmosphere import G
+from soaring_env.physics.thermals import _GAUSSIAN, GAUSSIAN_CUTOFF, WindField, updraft_at
+
+FAMILIES = ("straight", "curve", "spiral", "spline")
+STRAIGHT, CURVE, SPIRAL, SPLINE = range(4)
+#: Paper section III-B: airspeeds U1 [m/s], path angles U3 [deg], total turn per Ts [deg].
+SPEEDS = (10.0, 20.0)
+GAMMAS_DEG = (-45.0, -15.0, 0.0, 15.0, 45.0)
+CURVE_TURN_DEG = (-90.0, -60.0, -30.0, 30.0, 60.0, 90.0)
+SPIRAL_TURN_DEG = (-1080.0, -720.0, -360.0, -180.0, 180.0, 360.0, 720.0, 1080.0)
+SPLINE_TURN_DEG = (-90.0, -60.0, 60.0, 90.0)
+N_PRIMITIVES = 174
+
+#: Default largest RK4 substep near thermals [s]; tests show a 10x finer step moves the height
+#: after a primitive through a thermal core by far less than 1 cm.
+DEFAULT_MAX_SUBSTEP = 0.25
+
+# Columns of PrimitiveLibrary.table.
+COL_FAMILY, COL_AIRSPEED, COL_GAMMA, COL_CHI_DOT_1, COL_CHI_DOT_2 = range(5)
+
+
+@dataclass(frozen=True)
+class PrimitiveLibrary:
+    """The 174 motion primitives of the paper, in a fixed order (the discrete action index).
+
+    Order: family (straight 0-9, curve 10-69, spiral 70-149, spline 150-173), then airspeed
+    (10, 20 m/s), then turn rate (ascending; for splines the ordered pair (first, second half),
+    first ascending), then path angle (-45 ... 45 deg). Spline primitives switch their turn rate
+    at output point ``N // 2`` (time ``(N // 2) Ts / N``, i.e. ``Ts / 2`` for even N), as the
+    paper's eq. 11 defines them on the discrete time grid.
+
+    :param duration: primitive duration Ts [s] (not given in the paper; default 30 s).
+    :param n_points: number N of output points per primitive (default 30, >= 2).
+    """
+
+    duration: float = 30.0
+    n_points: int = 30
+    table: np.ndarray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        check_positive("duration", self.duration)
+        check_int("n_points", self.n_points, 2)
+        rows: list[tuple[float, float, float, float, float]] = []
+        ts = self.duration
+
+        def rate(deg: float) -> float:
+            return math.radians(deg) / ts
+
+        for v in SPEEDS:
+            for g in GAMMAS_DEG:
+                rows.append((STRAIGHT, v, math.radians(g), 0.0, 0.0))
+        for fam, turns in ((CURVE, CURVE_TURN_DEG), (SPIRAL, SPIRAL_TURN_DEG)):
+            for v in SPEEDS:
+                for a in turns:
+                    for g in GAMMAS_DEG:
+                        rows.append((fam, v, math.radians(g), rate(a), rate(a)))
+        for v in SPEEDS:
+            for a in SPLINE_TURN_DEG:
+                for b in SPLINE_TURN_DEG:
+                    if a != b:
+                        rows.append((SPLINE, v, 0.0, rate(a), rate(b)))
+        table = np.array(rows, dtype=np.float64)
+        assert table.shape == (N_PRIMITIVES, 5)
+        table.setflags(write=False)
+        object.__setattr__(self, "table", table)
+
+    def __len__(self) -> int:
+        return N_PRIMITIVES
+
+    @property
+    def family(self) -> np.ndarray:
+        """Family code per primitive (0 straight, 1 curve, 2 spiral, 3 spline)."""
+        return self.table[:, COL_FAMILY].astype(np.int64)
+
+    def describe(self, index: int) -> str:
+        """Human-readable description of primitive ``index``."""
+        f, v, g, w1, w2 = self.table[self.check_index(index)]
+        turn = math.degrees(w1) * self.duration
+        s = f"{FAMILIES[int(f)]} v_a={v:g} m/s gamma={math.degrees(g):+g} deg turn={turn:+g} deg"
+        if f == SPLINE:
+            s += f" then {math.degrees(w2) * self.duration:+g} deg"
+        return s
+
+    def check_index(self, index) -> int:
+        if isinstance(index, bool) or not isinstance(index, (int, np.integer)) or not 0 <= index < N_PRIMITIVES:
+            raise ConfigError(f"primitive index {index!r} is invalid; allowed: integers 0..{N_PRIMITIVES - 1}")
+        return int(index)
+
+    def control_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The continuous envelope spanned by the primitives: low, high of (v_a [m/s],
+        chi_dot [rad/s], gamma [rad]) = ([10, 20], +-1080 deg / Ts, +-45 deg)."""
+        w = math.radians(max(SPIRAL_TURN_DEG)) / self.duration
+        g = math.radians(max(GAMMAS_DEG))
+        return np.array([min(SPEEDS), -w, -g]), np.array([max(SPEEDS), w, g])
+
+
+@dataclass(frozen=True)
+class Rollout:
+    """Result of :func:`rollout` for a batch of B start states (SI units, specific energy [J/kg]).
+
+    ``states[b, k]`` is ``[Pn, Pe, chi, h]`` at ``times[k] = (k + 1) duration / N``; chi is
+    wrapped to [-pi, pi). Cost terms: ``fuel`` = integral of T v_a / (m eta_ec eta_p) (>= 0),
+    ``potential`` = -g (h_end - h_start), ``kinetic`` = max(0, (v_a^2 - v_prev^2) / 2) / (eta_ec eta_p)
+    (the motor's work to change speed from the previous edge), ``cost`` = their sum: the net
+    specific energy spent, negative in strong lift.
+    """
+
+    states: np.ndarray
+    times: np.ndarray
+    fuel: np.ndarray
+    potential: np.ndarray
+    kinetic: np.ndarray
+    cost: np.ndarray
+    duration: np.ndarray
+    max_bank: np.ndarray
+    min_height: np.ndarray
+
+    @property
+    def final(self) -> np.ndarray:
+        """Final states (B, 4)."""
+        return self.states[:, -1]
+
+    def __len__(self) -> int:
+        return self.states.shape[0]
+
+
+def rollout(
+    states,
+    field: WindField,
+    aircraft: Aircraft,
+    *,
+    primitive=None,
+    control=None,
+    library: PrimitiveLibrary | None = None,
+    duration: float | None = None,
+    t0=0.0,
+    airspeed_prev=None,
+    max_substep: float = DEFAULT_MAX_SUBSTEP,
+) -> Rollout:
+    """Propagate a batch of start states under a primitive or a constant control.
+
+    :param states: start states ``[Pn, Pe, chi, h]`` [m, m, rad, m], shape (4,) or (B, 4).
+    :param field: ambient wind and thermals.
+    :param aircraft: aircraft and thrust model.
+    :param primitive: primitive index (int, or (B,) ints) -- exactly one of ``primitive``/``control``.
+    :param control: constant control ``(v_a [m/s], chi_dot [rad/s], gamma [rad])``, shape (3,) or (B, 3).
+    :param library: primitive library (Ts, N); default ``PrimitiveLibrary()``.
+    :param duration: how long the control is held [s]; default the library's Ts.
+    :param t0: start time [s], scalar or (B,); matters only for drifting thermals.
+    :param airspeed_prev: airspeed of the previous edge [m/s] (scalar or (B,)), for the kinetic
+        term; None or NaN entries charge nothing.
+    :param max_substep: largest integration substep near thermals [s].
+    :returns: a :class:`Rollout`; always batched (B >= 1).
+    """
+    lib = library if library is not None else _default_library()
+    x = np.asarray(states, dtype=np.float64)
+    if x.ndim == 1:
+        x = x[None, :]
+    if x.ndim != 2 or x.shape[1] != 4:
+        raise ConfigError(f"states has shape {np.shape(states)}; expected (4,) or (B, 4) [Pn, Pe, chi, h]")
+    check_array_finite("states", x)
+    if (primitive is None) == (control is None):
+        raise ConfigError("rollout needs exactly one of primitive= or control=")
+    if primitive is not None:
+        idx = np.asarray(primitive)
+        if idx.ndim > 1 or idx.dtype.kind not in "iu" or np.any(idx < 0) or np.any(idx >= N_PRIMITIVES):
+            raise ConfigError(
+                f"primitive={primitive!r} is invalid; allowed: an integer or 1-D integer array in 0..{N_PRIMITIVES - 1}"
+            )
+        b = _batch(x.shape[0], idx.size if idx.ndim else 1, "primitive")
+        rows = lib.table[np.broadcast_to(idx, (b,))]
+        ctrl = np.ascontiguousarray(rows[:, [COL_AIRSPEED, COL_GAMMA, COL_CHI_DOT_1, COL_CHI_DOT_2]])
+    else:
+        u = np.asarray(control, dtype=np.float64)
+        if u.ndim == 1:
+            u = u[None, :]
+        if u.ndim != 2 or u.shape[1] != 3:
+            raise ConfigError(f"control has shape {np.shape(control)}; expected (3,) or (B, 3) [v_a, chi_dot, gamma]")
+        check_array_finite("control", u)
+        b = _batch(x.shape[0], u.shape[0], "control")
+        u = np.broadcast_to(u, (b, 3))
+        if np.any(u[:, 0] <= 0.0):
+            raise ConfigError(f"control airspeed {u[:, 0].min()!r} must be > 0 m/s")
+        if np.any(np.abs(u[:, 2]) >= math.pi / 2):
+            raise ConfigError(f"control gamma {np.abs(u[:, 2]).max()!r} must lie in (-pi/2, pi/2) rad")
+        ctrl = np.ascontiguousarray(np.stack([u[:, 0], u[:, 2], u[:, 1], u[:, 1]], axis=1))
+    dur = lib.duration if duration is None else check_positive("duration", duration)
+    check_positive("max_substep", max_substep)
+    t0a = np.ascontiguousarray(np.broadcast_to(np.asarray(t0, dtype=np.float64), (b,)))
+    check_array_finite("t0", t0a)
+    vp = np.full(b, np.nan) if airspeed_prev is None else np.broadcast_to(np.asarray(airspeed_prev, np.float64), (b,))
+    n_pts = lib.n_points
+    x = np.broadcast_to(x, (b, 4))
+    out_states = np.empty((b, n_pts, 4))
+    out_terms = np.empty((b, 6))
+    dvx, dvy = (field.wind_north, field.wind_east) if field.drift else (0.0, 0.0)
+    _rollout_kernel(
+        np.ascontiguousarray(x),
+        t0a,
+        ctrl,
+        np.ascontiguousarray(vp),
+        dur,
+        n_pts,
+        n_pts // 2,
+        max_substep,
+        field.packed,
+        field.model_code,
+        field.zi,
+        field.wind_north,
+        field.wind_east,
+        dvx,
+        dvy,
+        aircraft.packed(),
+        out_states,
+        out_terms,
+    )
+    return Rollout(
+        states=out_states,
+        times=dur * np.arange(1, n_pts + 1) / n_pts,
+        fuel=out_terms[:, 0],
+        potential=out_terms[:, 1],
+        kinetic=out_terms[:, 2],
+        cost=out_terms[:, 3],
+        duration=np.full(b, dur),
+        max_bank=out_terms[:, 4],
+        min_height=out_terms[:, 5],
+    )
+
+
+def _batch(n_states: int, n_controls: int, what: str) -> int:
+    if n_states != n_controls and 1 not in (n_states, n_controls):
+        raise ConfigError(f"{n_states} states and {n_controls} {what} rows do not broadcast; give 1 or B of each")
+    return max(n_states, n_controls)
+
+
+_DEFAULT_LIBRARY: list[PrimitiveLibrary] = []
+
+
+def _default_library() -> PrimitiveLibrary:
+    if not _DEFAULT_LIBRARY:
+        _DEFAULT_LIBRARY.append(PrimitiveLibrary())
+    return _DEFAULT_LIBRARY[0]
+
+
+@njit(cache=True, inline="always")
+def _advance(n, e, c, s, u, om, tau, cd, sd, wn, we):
+    """Exact arc (or line) of horizontal air speed u and turn rate om over tau, plus wind drift.
+
+    (c, s) = cos/sin of the course at the start; (cd, sd) = cos/sin(om tau) precomputed.
+    """
+    c2 = c * cd - s * sd
+    s2 = s * cd + c * sd
+    a = om * tau
+    if abs(a) > 1e-5:
+        k = u / om
+        n2 = n + k * (s2 - s) + wn * tau
+        e2 = e + k * (c - c2) + we * tau
+    else:  # second-order series: avoids u/om cancellation, error < u tau a^2 / 6
+        n2 = n + u * tau * (c - 0.5 * a * s) + wn * tau
+        e2 = e + u * tau * (s + 0.5 * a * c) + we * tau
+    return n2, e2, c2, s2
+
+
+@njit(cache=True)
+def _rollout_kernel(
+    x0, t0, ctrl, v_prev, dur, n_pts, k_switch, max_substep, th, model, zi, wn, we, dvx, dvy, ac, out, terms
+):
+    nth = th.shape[0]
+    dt = dur / n_pts
+    m_sub = max(1, int(math.ceil(dt / max_substep - 1e-9)))
+    hs = dt / m_sub
+    wind = math.sqrt(wn * wn + we * we)
+    mass_eta = ac[_AC_MASS] * ac[_AC_ETA]
+    two_pi = 2.0 * math.pi
+    for b in range(x0.shape[0]):
+        v = ctrl[b, 0]
+        gam = ctrl[b, 1]
+        u = v * math.cos(gam)
+        climb = v * math.sin(gam)
+        n = x0[b, 0]
+        e = x0[b, 1]
+        chi = x0[b, 2]
+        h = x0[b, 3]
+        h_start = h
+        c = math.cos(chi)
+        s = math.sin(chi)
+        reach = (u + 2.0 * wind) * dt
+        max_bank = 0.0
+        fuel = 0.0
+        min_h = h
+        f_prev = 0.0
+        om = cd = sd = ch = sh = 0.0
+        cos_phi = 1.0
+        for k in range(n_pts):
+            if k == 0 or k == k_switch:
+                om = ctrl[b, 2] if k < k_switch else ctrl[b, 3]
+                cd = math.cos(om * dt)
+                sd = math.sin(om * dt)
+                ch = math.cos(0.5 * om * hs)
+                sh = math.sin(0.5 * om * hs)
+                tan_phi = v * om / G
+                cos_phi = 1.0 / math.sqrt(1.0 + tan_phi * tan_phi)
+                max_bank = max(max_bank, abs(math.atan(tan_phi)))
+                f_prev = _thrust(v, gam, cos_phi, h, ac) * v / mass_eta
+            t_start = t0[b] + k * dt
+            n1, e1, c1, s1 = _advance(n, e, c, s, u, om, dt, cd, sd, wn, we)
+            near = False
+            for j in range(nth):
+                infl = GAUSSIAN_CUTOFF * th[j, 3] if model == _GAUSSIAN else th[j, 3]
+                dx = n - th[j, 0] - dvx * t_start
+                dy = e - th[j, 1] - dvy * t_start
+                if dx * dx + dy * dy < (infl + reach) * (infl + reach):
+                    near = True
+                    break
+            if near:
+                pn, pe, pc, ps = n, e, c, s
+                hh = h
+                for m in range(m_sub):
+                    ts = t_start + m * hs
+                    k1 = climb + updraft_at(pn, pe, hh, ts, th, model, zi, dvx, dvy)
+                    mn, me, mc, ms = _advance(pn, pe, pc, ps, u, om, 0.5 * hs, ch, sh, wn, we)
+                    tm = ts + 0.5 * hs
+                    k2 = climb + updraft_at(mn, me, hh + 0.5 * hs * k1, tm, th, model, zi, dvx, dvy)
+                    k3 = climb + updraft_at(mn, me, hh + 0.5 * hs * k2, tm, th, model, zi, dvx, dvy)
+                    pn, pe, pc, ps = _advance(mn, me, mc, ms, u, om, 0.5 * hs, ch, sh, wn, we)
+                    k4 = climb + updraft_at(pn, pe, hh + hs * k3, ts + hs, th, model, zi, dvx, dvy)
+                    hh += hs / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+                h1 = hh
+            else:
+                h1 = h + climb * dt
+            chi_k = x0[b, 2] + (ctrl[b, 2] * min(k + 1, k_switch) + ctrl[b, 3] * max(0, k + 1 - k_switch)) * dt
+            out[b, k, 0] = n1
+            out[b, k, 1] = e1
+            out[b, k, 2] = chi_k - two_pi * math.floor((chi_k + math.pi) / two_pi)
+            out[b, k, 3] = h1
+            f1 = _thrust(v, gam, cos_phi, h1, ac) * v / mass_eta
+            fuel += 0.5 * (f_prev + f1) * dt
+            f_prev = f1
+            if h1 < min_h:
+                min_h = h1
+            n, e, c, s, h = n1, e1, c1, s1, h1
+        kinetic = 0.0
+        vp = v_prev[b]
+        if vp == vp and v > vp:  # NaN-safe: no previous edge charges nothing
+            kinetic = 0.5 * (v * v - vp * vp) / ac[_AC_ETA]
+        potential = -G * (h - h_start)
+        terms[b, 0] = fuel
+        terms[b, 1] = potential
+        terms[b, 2] = kinetic
+        terms[b, 3] = fuel + potential + kinetic
+        terms[b, 4] = max_bank
+        terms[b, 5] = min_h

@@ -1,0 +1,324 @@
+"""Scenarios: thermal layout, wind, start state, goal region and flight domain (frozen, JSON-able).
+
+The named ``"paper"`` scenario reproduces the setting of the paper's figure 2: one thermal between
+the start and the goal region. Its geometry is our choice (the paper gives none): start at the
+origin heading north at 300 m, goal 3 km north at 300 m (radius 150 m), an Allen thermal of
+w* = 2.56 m/s, zi = 1400 m (Allen's worked example) at 1.5 km north, 250 m east of the direct line.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import tempfile
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from soaring_env._validation import ConfigError, check_finite, check_positive, check_range
+from soaring_env.physics.thermals import Thermal, WindField
+
+
+@dataclass(frozen=True)
+class Bounds:
+    """Flight domain [m]: leaving it ends an episode; the ground is at height 0.
+
+    :param north_min: [m]; :param north_max: [m]; :param east_min: [m]; :param east_max: [m];
+    :param height_max: ceiling [m].
+    """
+
+    north_min: float = -1000.0
+    north_max: float = 4000.0
+    east_min: float = -2500.0
+    east_max: float = 2500.0
+    height_max: float = 1500.0
+
+    def __post_init__(self) -> None:
+        for name in ("north_min", "north_max", "east_min", "east_max"):
+            check_finite(f"bounds.{name}", getattr(self, name))
+        check_positive("bounds.height_max", self.height_max)
+        if self.north_max <= self.north_min:
+            raise ConfigError(f"bounds.north_max={self.north_max!r} must be > north_min={self.north_min!r}")
+        if self.east_max <= self.east_min:
+            raise ConfigError(f"bounds.east_max={self.east_max!r} must be > east_min={self.east_min!r}")
+
+    def contains(self, north, east, height) -> np.ndarray:
+        """True where a point is inside the domain (above ground, below the ceiling)."""
+        n, e, h = (np.asarray(a) for a in (north, east, height))
+        return (
+            (n >= self.north_min)
+            & (n <= self.north_max)
+            & (e >= self.east_min)
+            & (e <= self.east_max)
+            & (h > 0.0)
+            & (h <= self.height_max)
+        )
+
+    @property
+    def low(self) -> np.ndarray:
+        return np.array([self.north_min, self.east_min, 0.0])
+
+    @property
+    def high(self) -> np.ndarray:
+        return np.array([self.north_max, self.east_max, self.height_max])
+
+
+@dataclass(frozen=True)
+class GoalRegion:
+    """Spherical goal region: reached when a flown point lies within ``radius`` of the centre.
+
+    :param north: [m]; :param east: [m]; :param height: [m, > 0]; :param radius: [m, > 0].
+    """
+
+    north: float = 3000.0
+    east: float = 0.0
+    height: float = 300.0
+    radius: float = 150.0
+
+    def __post_init__(self) -> None:
+        check_finite("goal.north", self.north)
+        check_finite("goal.east", self.east)
+        h = check_finite("goal.height", self.height)
+        if h <= 0.0:
+            raise ConfigError(f"goal.height={self.height!r} is at or below the ground; it must be > 0 m")
+        check_positive("goal.radius", self.radius)
+
+    @property
+    def centre(self) -> np.ndarray:
+        return np.array([self.north, self.east, self.height])
+
+    def distance(self, north, east, height) -> np.ndarray:
+        """Euclidean distance [m] from points to the goal centre."""
+        return np.sqrt(
+            (np.asarray(north) - self.north) ** 2
+            + (np.asarray(east) - self.east) ** 2
+            + (np.asarray(height) - self.height) ** 2
+        )
+
+    def contains(self, north, east, height) -> np.ndarray:
+        return self.distance(north, east, height) <= self.radius
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One planning problem: the air, where the aircraft starts and where it must go.
+
+    :param field: ambient wind and thermals.
+    :param start: start state ``(Pn [m], Pe [m], chi [rad], h [m])``.
+    :param goal: goal region.
+    :param bounds: flight domain.
+    :param name: label used in results and plots.
+    """
+
+    field: WindField = dataclasses.field(default_factory=WindField)
+    start: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 300.0)
+    goal: GoalRegion = dataclasses.field(default_factory=GoalRegion)
+    bounds: Bounds = dataclasses.field(default_factory=Bounds)
+    name: str = "custom"
+
+    def __post_init__(self) -> None:
+        if len(self.start) != 4:
+            raise ConfigError(f"start={self.start!r} must be (Pn, Pe, chi, h)")
+        start = tuple(check_finite(f"start[{i}]", v) for i, v in enumerate(self.start))
+        object.__setattr__(self, "start", start)
+        n, e, _, h = start
+        if not bool(self.bounds.contains(n, e, h)):
+            raise ConfigError(
+                f"start position (north={n:g}, east={e:g}, height={h:g}) is outside the domain "
+                f"north [{self.bounds.north_min:g}, {self.bounds.north_max:g}], "
+                f"east [{self.bounds.east_min:g}, {self.bounds.east_max:g}], height (0, {self.bounds.height_max:g}]"
+            )
+        g = self.goal
+        if not bool(self.bounds.contains(g.north, g.east, g.height)):
+            raise ConfigError(
+                f"goal centre (north={g.north:g}, east={g.east:g}, height={g.height:g}) is outside the domain "
+                f"north [{self.bounds.north_min:g}, {self.bounds.north_max:g}], "
+                f"east [{self.bounds.east_min:g}, {self.bounds.east_max:g}], height (0, {self.bounds.height_max:g}]"
+            )
+        if bool(g.contains(n, e, h)):
+            raise ConfigError("start lies inside the goal region; the problem is already solved")
+
+    @property
+    def start_state(self) -> np.ndarray:
+        """Start state as a float64 array ``[Pn, Pe, chi, h]``."""
+        return np.array(self.start, dtype=np.float64)
+
+    def replace(self, **changes: Any) -> Scenario:
+        return replace(self, **changes)
+
+    # --- JSON -------------------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        f = self.field
+        return {
+            "name": self.name,
+            "start": list(self.start),
+            "goal": asdict(self.goal),
+            "bounds": asdict(self.bounds),
+            "field": {
+                "model": f.model,
+                "zi": f.zi,
+                "wind_north": f.wind_north,
+                "wind_east": f.wind_east,
+                "drift": f.drift,
+                "thermals": [asdict(t) for t in f.thermals],
+            },
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Scenario:
+        try:
+            fd = dict(d["field"])
+            thermals = tuple(Thermal(**t) for t in fd.pop("thermals", []))
+            return cls(
+                field=WindField(thermals=thermals, **fd),
+                start=tuple(d["start"]),
+                goal=GoalRegion(**d["goal"]),
+                bounds=Bounds(**d["bounds"]),
+                name=d.get("name", "custom"),
+            )
+        except (KeyError, TypeError) as exc:
+            raise ConfigError(f"scenario dict is malformed: {exc}") from None
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), indent=2)
+
+    @classmethod
+    def from_json(cls, text: str) -> Scenario:
+        return cls.from_dict(json.loads(text))
+
+    def save(self, path: str | os.PathLike[str]) -> None:
+        """Write the scenario as JSON, atomically (temporary file + rename)."""
+        atomic_write_text(path, self.to_json())
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> Scenario:
+        return cls.from_json(Path(path).read_text())
+
+
+def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:
+    """Write ``text`` to ``path`` so that readers see the old or the new file, never a torn one."""
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=p.parent, prefix=f".{p.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, p)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def paper_scenario() -> Scenario:
+    """The paper's figure-2 setting: one Allen thermal between the start and the goal region."""
+    return Scenario(
+        field=WindField(thermals=(Thermal(north=1500.0, east=250.0, strength=2.56),), model="allen", zi=1400.0),
+        start=(0.0, 0.0, 0.0, 300.0),
+        goal=GoalRegion(north=3000.0, east=0.0, height=300.0, radius=150.0),
+        bounds=Bounds(),
+        name="paper",
+    )
+
+
+SCENARIOS = {"paper": paper_scenario}
+
+
+def get_scenario(name: str) -> Scenario:
+    """A named scenario; raises with the list of known names."""
+    if name not in SCENARIOS:
+        raise ConfigError(f"scenario {name!r} is unknown; known: {', '.join(sorted(SCENARIOS))}")
+    return SCENARIOS[name]()
+
+
+def make_scenario(
+    rng: np.random.Generator,
+    *,
+    n_thermals: tuple[int, int] = (1, 5),
+    strength: tuple[float, float] = (1.5, 3.5),
+    wind_speed: tuple[float, float] = (0.0, 4.0),
+    goal_distance: tuple[float, float] = (1500.0, 3500.0),
+    height: tuple[float, float] = (200.0, 600.0),
+    model: str = "allen",
+    zi: float = 1400.0,
+    drift: bool = False,
+    bounds: Bounds | None = None,
+    name: str = "random",
+) -> Scenario:
+    """A random scenario drawn only from ``rng`` (same generator state -> same scenario).
+
+    Thermal count, positions (in the band between start and goal, so that using them is a real
+    choice), strengths w* [m/s], wind speed [m/s] and direction, start heading and height, goal
+    bearing, distance [m] and height are all drawn uniformly from the given ranges.
+    """
+    bounds = bounds or Bounds(-3000.0, 3000.0, -3000.0, 3000.0, 1500.0)
+    check_range("n_thermals[0]", n_thermals[0], 0, 1000)
+    if n_thermals[1] < n_thermals[0]:
+        raise ConfigError(f"n_thermals={n_thermals!r} must be (low, high) with low <= high")
+    for nm, (lo, hi) in (("strength", strength), ("wind_speed", wind_speed), ("goal_distance", goal_distance)):
+        if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo <= hi):
+            raise ConfigError(f"{nm}={(lo, hi)!r} must be finite (low, high) with 0 <= low <= high")
+    span_n = bounds.north_max - bounds.north_min
+    span_e = bounds.east_max - bounds.east_min
+    if goal_distance[1] > 0.9 * math.hypot(span_n, span_e):
+        raise ConfigError(f"goal_distance={goal_distance!r} does not fit in the domain {bounds!r}")
+    for _ in range(1000):
+        dist = rng.uniform(*goal_distance)
+        bearing = rng.uniform(-math.pi, math.pi)
+        cn = 0.5 * (bounds.north_min + bounds.north_max)
+        ce = 0.5 * (bounds.east_min + bounds.east_max)
+        sn = cn - 0.5 * dist * math.cos(bearing) + rng.uniform(-0.1, 0.1) * span_n
+        se = ce - 0.5 * dist * math.sin(bearing) + rng.uniform(-0.1, 0.1) * span_e
+        gn = sn + dist * math.cos(bearing)
+        ge = se + dist * math.sin(bearing)
+        sh = rng.uniform(*height)
+        gh = rng.uniform(*height)
+        chi = bearing + rng.uniform(-math.pi / 2, math.pi / 2)
+        chi = (chi + math.pi) % (2 * math.pi) - math.pi
+        k = int(rng.integers(n_thermals[0], n_thermals[1] + 1))
+        thermals = []
+        for _j in range(k):
+            along = rng.uniform(0.2, 0.8)
+            across = rng.uniform(-0.3, 0.3) * dist
+            tn = sn + along * (gn - sn) - across * math.sin(bearing)
+            te = se + along * (ge - se) + across * math.cos(bearing)
+            thermals.append(Thermal(north=tn, east=te, strength=rng.uniform(*strength)))
+        ws = rng.uniform(*wind_speed)
+        wd = rng.uniform(-math.pi, math.pi)
+        inside = bounds.contains(np.array([sn, gn]), np.array([se, ge]), np.array([sh, gh]))
+        margin = 300.0
+        if (
+            not inside.all()
+            or min(
+                sn - bounds.north_min,
+                bounds.north_max - sn,
+                se - bounds.east_min,
+                bounds.east_max - se,
+                gn - bounds.north_min,
+                bounds.north_max - gn,
+                ge - bounds.east_min,
+                bounds.east_max - ge,
+            )
+            < margin
+        ):
+            continue
+        return Scenario(
+            field=WindField(
+                thermals=tuple(thermals),
+                model=model,
+                zi=zi,
+                wind_north=ws * math.cos(wd),
+                wind_east=ws * math.sin(wd),
+                drift=drift,
+            ),
+            start=(sn, se, chi, sh),
+            goal=GoalRegion(north=gn, east=ge, height=gh, radius=150.0),
+            bounds=bounds,
+            name=name,
+        )
+    raise ConfigError("could not draw a scenario that fits the bounds; widen bounds or shorten goal_distance")
