@@ -7,7 +7,7 @@ plots -- goes through :func:`rollout`. It integrates the paper's 4-DOF kinematic
     dPe/dt = v_a sin(chi) cos(gamma) + w_e     dh/dt   = v_a sin(gamma) + w_up(Pn, Pe, h, t)
 
 for piecewise-constant controls. The horizontal motion is the exact circle-arc / line closed form
-plus the wind drift; only the updraft term is integrated numerically (classical RK4 with substeps of
+plus the wind drift; only the updraft term is integrated numerically (Simpson's rule on substeps of
 at most ``max_substep`` seconds, and only where the path is within a thermal's reach -- elsewhere the
 updraft is exactly zero and the height is linear in time).
 """
@@ -20,10 +20,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
+from soaring_env._jit import FASTMATH as _FM
 from soaring_env._validation import ConfigError, check_array_finite, check_int, check_positive
-from soaring_env.physics.aircraft import _AC_ETA, _AC_MASS, Aircraft, _thrust
-from soaring_env.physics.atmosphere import G
-from soaring_env.physics.thermals import _GAUSSIAN, GAUSSIAN_CUTOFF, WindField, updraft_at
+from soaring_env.physics.aircraft import _AC_ETA, _AC_MASS, _AC_MODEL, Aircraft, _thrust_at, _thrust_coeffs
+from soaring_env.physics.atmosphere import G, _density
+from soaring_env.physics.thermals import _GAUSSIAN, GAUSSIAN_CUTOFF, WindField, allen_reach, updraft_at
 
 FAMILIES = ("straight", "curve", "spiral", "spline")
 STRAIGHT, CURVE, SPIRAL, SPLINE = range(4)
@@ -37,7 +38,7 @@ N_PRIMITIVES = 174
 
 #: Default largest RK4 substep near thermals [s]; tests show a 10x finer step moves the height
 #: after a primitive through a thermal core by far less than 1 cm.
-DEFAULT_MAX_SUBSTEP = 0.25
+DEFAULT_MAX_SUBSTEP = 0.5
 
 # Columns of PrimitiveLibrary.table.
 COL_FAMILY, COL_AIRSPEED, COL_GAMMA, COL_CHI_DOT_1, COL_CHI_DOT_2 = range(5)
@@ -266,7 +267,7 @@ def _default_library() -> PrimitiveLibrary:
     return _DEFAULT_LIBRARY[0]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=_FM)
 def _advance(n, e, c, s, u, om, tau, cd, sd, wn, we):
     """Exact arc (or line) of horizontal air speed u and turn rate om over tau, plus wind drift.
 
@@ -285,7 +286,7 @@ def _advance(n, e, c, s, u, om, tau, cd, sd, wn, we):
     return n2, e2, c2, s2
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=_FM)
 def _rollout_kernel(
     x0, t0, ctrl, v_prev, dur, n_pts, k_switch, max_substep, th, model, zi, wn, we, dvx, dvy, ac, out, terms
 ):
@@ -295,7 +296,13 @@ def _rollout_kernel(
     hs = dt / m_sub
     wind = math.sqrt(wn * wn + we * we)
     mass_eta = ac[_AC_MASS] * ac[_AC_ETA]
+    tmodel = ac[_AC_MODEL]
     two_pi = 2.0 * math.pi
+    infl = np.empty(nth)
+    w_bound = 0.0  # |updraft| <= 1.2 w* (Allen's peak/w* stays below 1.1)
+    for j in range(nth):
+        w_bound = max(w_bound, 1.2 * th[j, 2])
+        infl[j] = GAUSSIAN_CUTOFF * th[j, 3] if model == _GAUSSIAN else th[j, 3]
     for b in range(x0.shape[0]):
         v = ctrl[b, 0]
         gam = ctrl[b, 1]
@@ -303,18 +310,27 @@ def _rollout_kernel(
         climb = v * math.sin(gam)
         n = x0[b, 0]
         e = x0[b, 1]
-        chi = x0[b, 2]
         h = x0[b, 3]
         h_start = h
-        c = math.cos(chi)
-        s = math.sin(chi)
+        c = math.cos(x0[b, 2])
+        s = math.sin(x0[b, 2])
+        # Relative to a (possibly drifting) thermal the aircraft moves at most u + 2|wind|.
         reach = (u + 2.0 * wind) * dt
+        any_near = False
+        for j in range(nth):
+            dx = n - th[j, 0] - dvx * t0[b]
+            dy = e - th[j, 1] - dvy * t0[b]
+            lim = infl[j] + reach * n_pts
+            if dx * dx + dy * dy < lim * lim:
+                any_near = True
         max_bank = 0.0
         fuel = 0.0
         min_h = h
         f_prev = 0.0
         om = cd = sd = ch = sh = 0.0
-        cos_phi = 1.0
+        kt = (0.0, 0.0, 0.0, 0.0)
+        g0 = 0.0
+        g0_ok = False
         for k in range(n_pts):
             if k == 0 or k == k_switch:
                 om = ctrl[b, 2] if k < k_switch else ctrl[b, 3]
@@ -323,41 +339,54 @@ def _rollout_kernel(
                 ch = math.cos(0.5 * om * hs)
                 sh = math.sin(0.5 * om * hs)
                 tan_phi = v * om / G
-                cos_phi = 1.0 / math.sqrt(1.0 + tan_phi * tan_phi)
                 max_bank = max(max_bank, abs(math.atan(tan_phi)))
-                f_prev = _thrust(v, gam, cos_phi, h, ac) * v / mass_eta
+                kt = _thrust_coeffs(v, gam, 1.0 / math.sqrt(1.0 + tan_phi * tan_phi), ac)
+                f_prev = _thrust_at(_density(h), kt, tmodel) * v / mass_eta
             t_start = t0[b] + k * dt
             n1, e1, c1, s1 = _advance(n, e, c, s, u, om, dt, cd, sd, wn, we)
             near = False
-            for j in range(nth):
-                infl = GAUSSIAN_CUTOFF * th[j, 3] if model == _GAUSSIAN else th[j, 3]
-                dx = n - th[j, 0] - dvx * t_start
-                dy = e - th[j, 1] - dvy * t_start
-                if dx * dx + dy * dy < (infl + reach) * (infl + reach):
-                    near = True
-                    break
+            if any_near:
+                for j in range(nth):
+                    dx = n - th[j, 0] - dvx * t_start
+                    dy = e - th[j, 1] - dvy * t_start
+                    lim = infl[j] + reach
+                    d2 = dx * dx + dy * dy
+                    if d2 < lim * lim:
+                        if model == _GAUSSIAN:
+                            near = True
+                            break
+                        # Allen: refine with 2 r2 at the highest height this interval can reach.
+                        lim = allen_reach(h + (abs(climb) + w_bound) * dt, zi) + reach
+                        if d2 < lim * lim:
+                            near = True
+                            break
             if near:
+                # Simpson's rule on each substep; the rates at the mid and end points use predicted
+                # heights (the updraft depends on h only weakly), and the end rate is reused as the
+                # next substep's start rate: two updraft evaluations per substep.
                 pn, pe, pc, ps = n, e, c, s
                 hh = h
+                if not g0_ok:
+                    g0 = climb + updraft_at(pn, pe, hh, t_start, th, model, zi, dvx, dvy)
                 for m in range(m_sub):
                     ts = t_start + m * hs
-                    k1 = climb + updraft_at(pn, pe, hh, ts, th, model, zi, dvx, dvy)
-                    mn, me, mc, ms = _advance(pn, pe, pc, ps, u, om, 0.5 * hs, ch, sh, wn, we)
-                    tm = ts + 0.5 * hs
-                    k2 = climb + updraft_at(mn, me, hh + 0.5 * hs * k1, tm, th, model, zi, dvx, dvy)
-                    k3 = climb + updraft_at(mn, me, hh + 0.5 * hs * k2, tm, th, model, zi, dvx, dvy)
-                    pn, pe, pc, ps = _advance(mn, me, mc, ms, u, om, 0.5 * hs, ch, sh, wn, we)
-                    k4 = climb + updraft_at(pn, pe, hh + hs * k3, ts + hs, th, model, zi, dvx, dvy)
-                    hh += hs / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+                    pn, pe, pc, ps = _advance(pn, pe, pc, ps, u, om, 0.5 * hs, ch, sh, wn, we)
+                    gm = climb + updraft_at(pn, pe, hh + 0.5 * hs * g0, ts + 0.5 * hs, th, model, zi, dvx, dvy)
+                    pn, pe, pc, ps = _advance(pn, pe, pc, ps, u, om, 0.5 * hs, ch, sh, wn, we)
+                    ge = climb + updraft_at(pn, pe, hh + hs * gm, ts + hs, th, model, zi, dvx, dvy)
+                    hh += hs / 6.0 * (g0 + 4.0 * gm + ge)
+                    g0 = ge
+                g0_ok = True
                 h1 = hh
             else:
+                g0_ok = False
                 h1 = h + climb * dt
             chi_k = x0[b, 2] + (ctrl[b, 2] * min(k + 1, k_switch) + ctrl[b, 3] * max(0, k + 1 - k_switch)) * dt
             out[b, k, 0] = n1
             out[b, k, 1] = e1
             out[b, k, 2] = chi_k - two_pi * math.floor((chi_k + math.pi) / two_pi)
             out[b, k, 3] = h1
-            f1 = _thrust(v, gam, cos_phi, h1, ac) * v / mass_eta
+            f1 = _thrust_at(_density(h1), kt, tmodel) * v / mass_eta
             fuel += 0.5 * (f_prev + f1) * dt
             f_prev = f1
             if h1 < min_h:

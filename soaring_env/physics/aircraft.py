@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from soaring_env._jit import FASTMATH as _FM
 from soaring_env._validation import check_choice, check_positive, check_range
 from soaring_env.physics.atmosphere import G, _density
 
@@ -121,21 +122,43 @@ def bank_angle(airspeed, chi_dot) -> np.ndarray:
 _AC_MASS, _AC_S, _AC_PIARE, _AC_CD0, _AC_CL0, _AC_ETA, _AC_MODEL = range(7)
 
 
-@njit(cache=True, inline="always")
-def _thrust(v: float, gamma: float, cos_phi: float, h: float, ac: np.ndarray) -> float:
-    """Steady-flight thrust [N], clipped at zero; see :meth:`Aircraft.thrust`."""
-    qs = 0.5 * _density(h) * v * v * ac[_AC_S]
+@njit(cache=True, inline="always", fastmath=_FM)
+def _thrust_coeffs(v: float, gamma: float, cos_phi: float, ac: np.ndarray) -> tuple[float, float, float, float]:
+    """Constants of the steady-flight thrust as a function of the air density rho.
+
+    "trim": ``T = a rho + b / rho + c``; "paper": ``T = sqrt((a rho + c)^2 + (b rho - d)^2)``.
+    Split out so that the rollout evaluates them once per control segment, not per point.
+    """
+    half_v2s = 0.5 * v * v * ac[_AC_S]
     w = ac[_AC_MASS] * G
     if ac[_AC_MODEL] == 0.0:
-        # "trim": dgamma/dt = 0 in the coordinated turn -> L = m g cos(gamma) / cos(phi).
-        cl = w * math.cos(gamma) / (cos_phi * qs)
-        drag = qs * (ac[_AC_CD0] + cl * cl / ac[_AC_PIARE])
-        t = drag + w * math.sin(gamma)
+        # "trim": dgamma/dt = 0 in the coordinated turn -> L = m g cos(gamma) / cos(phi);
+        # D = q S C_D0 + L^2 / (q S pi AR e), T = D + m g sin(gamma).
+        lift = w * math.cos(gamma) / cos_phi
+        return half_v2s * ac[_AC_CD0], lift * lift / (half_v2s * ac[_AC_PIARE]), w * math.sin(gamma), 0.0
+    # "paper": fixed C_L0, T_x = D + m g sin(gamma), T_z = L - m g cos(gamma) / cos(phi).
+    cl = ac[_AC_CL0]
+    return (
+        half_v2s * (ac[_AC_CD0] + cl * cl / ac[_AC_PIARE]),
+        half_v2s * cl,
+        w * math.sin(gamma),
+        w * math.cos(gamma) / cos_phi,
+    )
+
+
+@njit(cache=True, inline="always", fastmath=_FM)
+def _thrust_at(rho: float, k: tuple[float, float, float, float], model: float) -> float:
+    """Thrust [N] from :func:`_thrust_coeffs`, clipped at zero (no regeneration)."""
+    if model == 0.0:
+        t = k[0] * rho + k[1] / rho + k[2]
     else:
-        # "paper": fixed C_L0, T_x = D + m g sin(gamma), T_z = L - m g cos(gamma)/cos(phi).
-        cl = ac[_AC_CL0]
-        drag = qs * (ac[_AC_CD0] + cl * cl / ac[_AC_PIARE])
-        tx = drag + w * math.sin(gamma)
-        tz = qs * cl - w * math.cos(gamma) / cos_phi
+        tx = k[0] * rho + k[2]
+        tz = k[1] * rho - k[3]
         t = math.sqrt(tx * tx + tz * tz)
     return t if t > 0.0 else 0.0
+
+
+@njit(cache=True, fastmath=_FM)
+def _thrust(v: float, gamma: float, cos_phi: float, h: float, ac: np.ndarray) -> float:
+    """Steady-flight thrust [N], clipped at zero; see :meth:`Aircraft.thrust`."""
+    return _thrust_at(_density(h), _thrust_coeffs(v, gamma, cos_phi, ac), ac[_AC_MODEL])

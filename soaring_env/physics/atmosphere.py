@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from soaring_env._jit import FASTMATH as _FM
+
 #: Standard gravity [m/s^2] (ISO 80000-3).
 G = 9.80665
 #: ISA sea-level density [kg/m^3], temperature [K] and lapse rate [K/m] (ISO 2533:1975).
@@ -15,12 +17,12 @@ LAPSE = 0.0065
 ISA_EXPONENT = 4.2559
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=_FM)
 def _density(h: float) -> float:
     return RHO0 * (1.0 - LAPSE * h / T0) ** ISA_EXPONENT
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=_FM)
 def _density_many(h: np.ndarray, out: np.ndarray) -> None:
     for i in range(h.size):
         out.flat[i] = _density(h.flat[i])

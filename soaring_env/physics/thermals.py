@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
+from soaring_env._jit import FASTMATH as _FM
 from soaring_env._validation import ConfigError, check_choice, check_finite, check_positive
 
 THERMAL_MODELS = ("allen", "gaussian")
@@ -152,17 +153,24 @@ class WindField:
         return {"r2": r2, "r1": r1, "wbar": wbar, "w_peak": w_peak}
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=_FM)
+def allen_reach(z: float, zi: float) -> float:
+    """2 r2 at height ``z`` [m]: no Allen updraft or downdraft beyond it (r2 grows with z below zi)."""
+    zz = min(max(z, 0.0), zi) / zi
+    return 2.0 * max(10.0, 0.102 * zz ** (1.0 / 3.0) * (1.0 - 0.25 * zz) * zi)
+
+
+@njit(cache=True, inline="always", fastmath=_FM)
 def _r1_over_r2(r2: float) -> float:
     return 0.0011 * r2 + 0.14 if r2 < 600.0 else 0.8
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=_FM)
 def _allen_shape() -> np.ndarray:
     return ALLEN_SHAPE
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=_FM)
 def updraft_at(
     x: float, y: float, z: float, t: float, th: np.ndarray, model: int, zi: float, dvx: float, dvy: float
 ) -> float:
@@ -193,6 +201,8 @@ def updraft_at(
             jb = j
     if jb < 0:
         return 0.0
+    if best >= th[jb, 3] * th[jb, 3]:  # beyond 2 r2 at any height: skip the cube root
+        return 0.0
     zz = z / zi
     cb = zz ** (1.0 / 3.0)
     r2 = max(10.0, 0.102 * cb * (1.0 - 0.25 * zz) * zi)
@@ -218,7 +228,7 @@ def updraft_at(
     return ws * w_peak + wd * wbar
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=_FM)
 def _updraft_many(n, e, h, t, th, model, zi, dvx, dvy, out) -> None:
     for i in range(n.size):
         out[i] = updraft_at(n[i], e[i], h[i], t[i], th, model, zi, dvx, dvy)
