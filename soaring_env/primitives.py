@@ -23,7 +23,7 @@ from numba import njit
 from soaring_env._jit import FASTMATH as _FM
 from soaring_env._validation import ConfigError, check_array_finite, check_int, check_positive
 from soaring_env.physics.aircraft import _AC_ETA, _AC_MASS, _AC_MODEL, Aircraft, _thrust_at, _thrust_coeffs
-from soaring_env.physics.atmosphere import G, _density
+from soaring_env.physics.atmosphere import LAPSE, T0, G, _density, _density_near
 from soaring_env.physics.thermals import _GAUSSIAN, GAUSSIAN_CUTOFF, WindField, allen_reach, updraft_at
 
 FAMILIES = ("straight", "curve", "spiral", "spline")
@@ -36,9 +36,11 @@ SPIRAL_TURN_DEG = (-1080.0, -720.0, -360.0, -180.0, 180.0, 360.0, 720.0, 1080.0)
 SPLINE_TURN_DEG = (-90.0, -60.0, 60.0, 90.0)
 N_PRIMITIVES = 174
 
-#: Default largest RK4 substep near thermals [s]; tests show a 10x finer step moves the height
-#: after a primitive through a thermal core by far less than 1 cm.
+#: Default largest integration substep near thermals [s] at a ground-track speed of
+#: SUBSTEP_REFERENCE_SPEED (i.e. 10 m of track); a 10x finer step moves the height after a
+#: primitive through a thermal core by a few millimetres at most.
 DEFAULT_MAX_SUBSTEP = 0.5
+SUBSTEP_REFERENCE_SPEED = 20.0
 
 # Columns of PrimitiveLibrary.table.
 COL_FAMILY, COL_AIRSPEED, COL_GAMMA, COL_CHI_DOT_1, COL_CHI_DOT_2 = range(5)
@@ -174,7 +176,8 @@ def rollout(
     :param t0: start time [s], scalar or (B,); matters only for drifting thermals.
     :param airspeed_prev: airspeed of the previous edge [m/s] (scalar or (B,)), for the kinetic
         term; None or NaN entries charge nothing.
-    :param max_substep: largest integration substep near thermals [s].
+    :param max_substep: largest integration substep near thermals [s] at a ground-track speed of
+        20 m/s; slower edges take proportionally longer substeps (same track length, 10 m by default).
     :returns: a :class:`Rollout`; always batched (B >= 1).
     """
     lib = library if library is not None else _default_library()
@@ -292,8 +295,6 @@ def _rollout_kernel(
 ):
     nth = th.shape[0]
     dt = dur / n_pts
-    m_sub = max(1, int(math.ceil(dt / max_substep - 1e-9)))
-    hs = dt / m_sub
     wind = math.sqrt(wn * wn + we * we)
     mass_eta = ac[_AC_MASS] * ac[_AC_ETA]
     tmodel = ac[_AC_MODEL]
@@ -308,10 +309,16 @@ def _rollout_kernel(
         gam = ctrl[b, 1]
         u = v * math.cos(gam)
         climb = v * math.sin(gam)
+        # The updraft varies along the ground track, so substeps keep a fixed track length:
+        # max_substep seconds at SUBSTEP_REFERENCE_SPEED.
+        m_sub = max(1, int(math.ceil(dt * (u + wind) / (SUBSTEP_REFERENCE_SPEED * max_substep) - 1e-9)))
+        hs = dt / m_sub
         n = x0[b, 0]
         e = x0[b, 1]
         h = x0[b, 3]
         h_start = h
+        rho_start = _density(h)
+        theta_start = 1.0 - LAPSE * h / T0
         c = math.cos(x0[b, 2])
         s = math.sin(x0[b, 2])
         # Relative to a (possibly drifting) thermal the aircraft moves at most u + 2|wind|.
@@ -341,7 +348,7 @@ def _rollout_kernel(
                 tan_phi = v * om / G
                 max_bank = max(max_bank, abs(math.atan(tan_phi)))
                 kt = _thrust_coeffs(v, gam, 1.0 / math.sqrt(1.0 + tan_phi * tan_phi), ac)
-                f_prev = _thrust_at(_density(h), kt, tmodel) * v / mass_eta
+                f_prev = _thrust_at(_density_near(h, h_start, rho_start, theta_start), kt, tmodel) * v / mass_eta
             t_start = t0[b] + k * dt
             n1, e1, c1, s1 = _advance(n, e, c, s, u, om, dt, cd, sd, wn, we)
             near = False
@@ -386,7 +393,7 @@ def _rollout_kernel(
             out[b, k, 1] = e1
             out[b, k, 2] = chi_k - two_pi * math.floor((chi_k + math.pi) / two_pi)
             out[b, k, 3] = h1
-            f1 = _thrust_at(_density(h1), kt, tmodel) * v / mass_eta
+            f1 = _thrust_at(_density_near(h1, h_start, rho_start, theta_start), kt, tmodel) * v / mass_eta
             fuel += 0.5 * (f_prev + f1) * dt
             f_prev = f1
             if h1 < min_h:

@@ -22,6 +22,33 @@ def _density(h: float) -> float:
     return RHO0 * (1.0 - LAPSE * h / T0) ** ISA_EXPONENT
 
 
+def _binomial_coefficients(n: float, degree: int) -> np.ndarray:
+    c = [1.0]
+    for i in range(1, degree + 1):
+        c.append(c[-1] * (n - i + 1) / i)
+    return np.array(c)
+
+
+#: Taylor coefficients of (1 + x)^ISA_EXPONENT up to x^7 (see :func:`_density_near`).
+_DENSITY_SERIES = _binomial_coefficients(ISA_EXPONENT, 7)
+_DENSITY_SERIES_MAX_X = 0.05
+
+
+@njit(cache=True, inline="always", fastmath=_FM)
+def _density_near(h: float, h_ref: float, rho_ref: float, theta_ref: float) -> float:
+    """ISA density at ``h`` from its value ``rho_ref`` at a nearby height ``h_ref``.
+
+    ``rho(h) = rho_ref (1 + x)^4.2559`` with ``x = -L (h - h_ref) / (T0 theta_ref)``, summed as its
+    degree-7 binomial series when ``|x| <= 0.05`` (|h - h_ref| up to ~2 km): relative error below
+    4e-14, at a third of the cost of the power function the rollout would otherwise call per point.
+    """
+    x = -LAPSE * (h - h_ref) / (T0 * theta_ref)
+    if abs(x) > _DENSITY_SERIES_MAX_X:
+        return _density(h)
+    c = _DENSITY_SERIES
+    return rho_ref * (c[0] + x * (c[1] + x * (c[2] + x * (c[3] + x * (c[4] + x * (c[5] + x * (c[6] + x * c[7])))))))
+
+
 @njit(cache=True, fastmath=_FM)
 def _density_many(h: np.ndarray, out: np.ndarray) -> None:
     for i in range(h.size):

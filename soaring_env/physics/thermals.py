@@ -149,7 +149,7 @@ class WindField:
         r2 = max(10.0, 0.102 * cb * (1.0 - 0.25 * zz) * self.zi)
         r1 = _r1_over_r2(r2) * r2
         wbar = strength * cb * (1.0 - 1.1 * zz)
-        w_peak = 3.0 * wbar * (r2**3 - r2 * r2 * r1) / (r2**3 - r1**3)
+        w_peak = 3.0 * wbar * (r2**3 - r2 * r2 * r1) / (r2**3 - r1**3)  # Allen eq. 4 as published
         return {"r2": r2, "r1": r1, "wbar": wbar, "w_peak": w_peak}
 
 
@@ -212,7 +212,8 @@ def updraft_at(
     wbar = th[jb, 2] * cb * (1.0 - 1.1 * zz)
     r1r2 = _r1_over_r2(r2)
     r1 = r1r2 * r2
-    w_peak = 3.0 * wbar * (r2 * r2 * r2 - r2 * r2 * r1) / (r2 * r2 * r2 - r1 * r1 * r1)
+    # Allen eq. 4, 3 wbar (r2^3 - r2^2 r1) / (r2^3 - r1^3), with (r2 - r1) cancelled.
+    w_peak = 3.0 * wbar / (1.0 + r1r2 + r1r2 * r1r2)
     row = int(round((r1r2 - 0.14) / 0.11))
     row = min(max(row, 0), 6)
     k = _allen_shape()
