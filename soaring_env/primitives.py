@@ -35,12 +35,14 @@ CURVE_TURN_DEG = (-90.0, -60.0, -30.0, 30.0, 60.0, 90.0)
 SPIRAL_TURN_DEG = (-1080.0, -720.0, -360.0, -180.0, 180.0, 360.0, 720.0, 1080.0)
 SPLINE_TURN_DEG = (-90.0, -60.0, 60.0, 90.0)
 N_PRIMITIVES = 174
+#: Start heights must lie below the ISA troposphere's top [m].
+MAX_HEIGHT = 11000.0
 
-#: Default largest integration substep near thermals [s] at a ground-track speed of
-#: SUBSTEP_REFERENCE_SPEED (i.e. 10 m of track); a 10x finer step moves the height after a
-#: primitive through a thermal core by a few millimetres at most.
+#: Default largest integration substep near thermals [s]; a 10x finer step moves the height after a
+#: primitive through a thermal core by < 2 mm (tests). Across discontinuities of the field (the
+#: updraft cut at zi, the nearest-thermal boundary between overlapping Allen thermals) fixed steps
+#: are first order: the error there is at most about the jump times one substep.
 DEFAULT_MAX_SUBSTEP = 0.5
-SUBSTEP_REFERENCE_SPEED = 20.0
 
 # Columns of PrimitiveLibrary.table.
 COL_FAMILY, COL_AIRSPEED, COL_GAMMA, COL_CHI_DOT_1, COL_CHI_DOT_2 = range(5)
@@ -176,8 +178,7 @@ def rollout(
     :param t0: start time [s], scalar or (B,); matters only for drifting thermals.
     :param airspeed_prev: airspeed of the previous edge [m/s] (scalar or (B,)), for the kinetic
         term; None or NaN entries charge nothing.
-    :param max_substep: largest integration substep near thermals [s] at a ground-track speed of
-        20 m/s; slower edges take proportionally longer substeps (same track length, 10 m by default).
+    :param max_substep: largest integration substep near thermals [s].
     :returns: a :class:`Rollout`; always batched (B >= 1).
     """
     lib = library if library is not None else _default_library()
@@ -187,6 +188,8 @@ def rollout(
     if x.ndim != 2 or x.shape[1] != 4:
         raise ConfigError(f"states has shape {np.shape(states)}; expected (4,) or (B, 4) [Pn, Pe, chi, h]")
     check_array_finite("states", x)
+    if np.any(x[:, 3] >= MAX_HEIGHT):
+        raise ConfigError(f"states height {x[:, 3].max()!r} m is outside the model's range: below {MAX_HEIGHT:g} m")
     if (primitive is None) == (control is None):
         raise ConfigError("rollout needs exactly one of primitive= or control=")
     if primitive is not None:
@@ -216,7 +219,15 @@ def rollout(
     check_positive("max_substep", max_substep)
     t0a = np.ascontiguousarray(np.broadcast_to(np.asarray(t0, dtype=np.float64), (b,)))
     check_array_finite("t0", t0a)
-    vp = np.full(b, np.nan) if airspeed_prev is None else np.broadcast_to(np.asarray(airspeed_prev, np.float64), (b,))
+    if airspeed_prev is None:
+        vp = np.full(b, np.nan)
+    else:
+        vp = np.broadcast_to(np.asarray(airspeed_prev, np.float64), (b,))
+        known = vp[~np.isnan(vp)]
+        if np.any(~np.isfinite(known) | (known <= 0.0)):
+            raise ConfigError(
+                f"airspeed_prev={airspeed_prev!r} must be > 0 m/s and finite, or NaN/None for 'no previous edge'"
+            )
     n_pts = lib.n_points
     x = np.broadcast_to(x, (b, 4))
     out_states = np.empty((b, n_pts, 4))
@@ -295,6 +306,8 @@ def _rollout_kernel(
 ):
     nth = th.shape[0]
     dt = dur / n_pts
+    m_sub = max(1, int(math.ceil(dt / max_substep - 1e-9)))
+    hs = dt / m_sub
     wind = math.sqrt(wn * wn + we * we)
     mass_eta = ac[_AC_MASS] * ac[_AC_ETA]
     tmodel = ac[_AC_MODEL]
@@ -309,10 +322,6 @@ def _rollout_kernel(
         gam = ctrl[b, 1]
         u = v * math.cos(gam)
         climb = v * math.sin(gam)
-        # The updraft varies along the ground track, so substeps keep a fixed track length:
-        # max_substep seconds at SUBSTEP_REFERENCE_SPEED.
-        m_sub = max(1, int(math.ceil(dt * (u + wind) / (SUBSTEP_REFERENCE_SPEED * max_substep) - 1e-9)))
-        hs = dt / m_sub
         n = x0[b, 0]
         e = x0[b, 1]
         h = x0[b, 3]
@@ -391,7 +400,10 @@ def _rollout_kernel(
             chi_k = x0[b, 2] + (ctrl[b, 2] * min(k + 1, k_switch) + ctrl[b, 3] * max(0, k + 1 - k_switch)) * dt
             out[b, k, 0] = n1
             out[b, k, 1] = e1
-            out[b, k, 2] = chi_k - two_pi * math.floor((chi_k + math.pi) / two_pi)
+            chi_k -= two_pi * math.floor((chi_k + math.pi) / two_pi)
+            if chi_k >= math.pi:  # rounding can land exactly on +pi
+                chi_k -= two_pi
+            out[b, k, 2] = chi_k
             out[b, k, 3] = h1
             f1 = _thrust_at(_density_near(h1, h_start, rho_start, theta_start), kt, tmodel) * v / mass_eta
             fuel += 0.5 * (f_prev + f1) * dt

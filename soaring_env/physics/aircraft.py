@@ -21,7 +21,7 @@ import numpy as np
 from numba import njit
 
 from soaring_env._jit import FASTMATH as _FM
-from soaring_env._validation import check_choice, check_positive, check_range
+from soaring_env._validation import ConfigError, check_choice, check_positive, check_range
 from soaring_env.physics.atmosphere import G, _density
 
 THRUST_MODELS = ("trim", "paper")
@@ -98,6 +98,17 @@ class Aircraft:
         :param bank: bank angle phi [rad]; :param height: height [m] (for the ISA density).
         """
         v, g_, p, h = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (airspeed, gamma, bank, height)))
+        for name, arr, ok in (
+            ("airspeed", v, v > 0.0),
+            ("gamma", g_, np.abs(g_) < math.pi / 2),
+            ("bank", p, np.abs(p) < math.pi / 2),
+            ("height", h, h < 11000.0),
+        ):
+            if not np.all(ok & np.isfinite(arr)):
+                raise ConfigError(
+                    f"{name}={arr[~(ok & np.isfinite(arr))].ravel()[0]!r} is invalid; allowed: finite, airspeed > 0, "
+                    "|gamma| < pi/2, |bank| < pi/2, height < 11000 m"
+                )
         out = np.empty(v.shape)
         ac = self.packed()
         for i in np.ndindex(v.shape):
