@@ -9,19 +9,69 @@ replays through the env bit for bit.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from soaring_env._validation import ConfigError, check_array_finite, check_positive, check_range
 from soaring_env.physics.aircraft import Aircraft
-from soaring_env.primitives import DEFAULT_MAX_SUBSTEP, N_PRIMITIVES, PrimitiveLibrary, Rollout, rollout
+from soaring_env.primitives import DEFAULT_MAX_SUBSTEP, N_PRIMITIVES, PrimitiveLibrary, Propagator, Rollout, rollout
 from soaring_env.scenario import Scenario, paper_scenario
 
 #: Edge outcome codes returned by :meth:`SoaringModel.classify`.
 FLYING, GOAL, CRASH, OUT_OF_BOUNDS = 0, 1, 2, 3
 OUTCOMES = ("flying", "goal", "crash", "out_of_bounds")
+
+#: Layout of the classification row (:func:`classify_params`): goal north, east, height, radius [m],
+#: domain north min/max, east min/max, height max [m]. Longer rows (the envs') start with it.
+N_CLASSIFY_PARAMS = 9
+
+
+def classify_params(scenario: Scenario) -> np.ndarray:
+    """Goal region and domain of ``scenario`` as the float64 row read by :func:`classify_row`."""
+    g, bd = scenario.goal, scenario.bounds
+    return np.array(
+        [g.north, g.east, g.height, g.radius, bd.north_min, bd.north_max, bd.east_min, bd.east_max, bd.height_max]
+    )
+
+
+@njit(cache=True)
+def classify_row(s: np.ndarray, b: int, prm: np.ndarray) -> tuple[int, int]:
+    """First event along edge ``b`` of ``s`` (B, N, 4): (outcome code, output point index).
+
+    At the first point that is in the goal region (distance <= radius), on or below the ground, or
+    outside the domain -- in that priority at one point; ``FLYING`` edges give N - 1. The one
+    implementation of the rule: :meth:`SoaringModel.classify` and the envs call it.
+    """
+    gn, ge, gh, gr = prm[0], prm[1], prm[2], prm[3]
+    nmin, nmax, emin, emax, hmax = prm[4], prm[5], prm[6], prm[7], prm[8]
+    n_pts = s.shape[1]
+    for k in range(n_pts):
+        n = s[b, k, 0]
+        e = s[b, k, 1]
+        h = s[b, k, 3]
+        dn = n - gn
+        de = e - ge
+        dh = h - gh
+        if math.sqrt(dn * dn + de * de + dh * dh) <= gr:
+            return GOAL, k
+        if h <= 0.0:
+            return CRASH, k
+        if not (n >= nmin and n <= nmax and e >= emin and e <= emax and h <= hmax):
+            return OUT_OF_BOUNDS, k
+    return FLYING, n_pts - 1
+
+
+@njit(cache=True)
+def classify_batch(s: np.ndarray, prm: np.ndarray, codes: np.ndarray, ks: np.ndarray) -> None:
+    """:func:`classify_row` for every edge b of ``s`` with its row ``prm[b]``, into ``codes``, ``ks``."""
+    for b in range(s.shape[0]):
+        c, k = classify_row(s, b, prm[b])
+        codes[b] = c
+        ks[b] = k
 
 
 @dataclass(frozen=True)
@@ -101,32 +151,29 @@ class SoaringModel:
         lo, hi = self.library.control_bounds()
         return 2.0 * (np.asarray(control, dtype=np.float64) - lo) / (hi - lo) - 1.0
 
+    @functools.cached_property
+    def propagator(self) -> Propagator:
+        """The packed fast path of :func:`~soaring_env.primitives.rollout` for this model."""
+        return Propagator(self.scenario.field, self.aircraft, self.library, self.max_substep)
+
     # --- outcomes ------------------------------------------------------------------------------
+    @functools.cached_property
+    def classify_params(self) -> np.ndarray:
+        """Goal region and domain as the (N_CLASSIFY_PARAMS,) row read by :func:`classify_row`."""
+        return classify_params(self.scenario)
+
     def classify(self, result: Rollout) -> tuple[np.ndarray, np.ndarray]:
         """First event along each edge: (outcome code (B,), index of the output point (B,)).
 
         An edge reaches the goal if one of its N points lies in the goal region before any point
         hits the ground or leaves the domain; ``FLYING`` edges have index N - 1.
         """
-        s = result.states
-        sc = self.scenario
-        in_goal = sc.goal.contains(s[..., 0], s[..., 1], s[..., 3])
-        crash = s[..., 3] <= 0.0
-        out = ~sc.bounds.contains(s[..., 0], s[..., 1], s[..., 3]) & ~crash
-        n = s.shape[1]
-        big = n + 1
-
-        def first(mask: np.ndarray) -> np.ndarray:
-            return np.where(mask.any(axis=1), mask.argmax(axis=1), big)
-
-        kg, kc, ko = first(in_goal), first(crash), first(out)
-        k = np.minimum(np.minimum(kg, kc), ko)
-        code = np.full(s.shape[0], FLYING)
-        code[k == ko] = OUT_OF_BOUNDS
-        code[k == kc] = CRASH
-        code[k == kg] = GOAL  # goal wins ties: the point is inside the region
-        code[k == big] = FLYING
-        return code, np.where(k == big, n - 1, k)
+        s = np.ascontiguousarray(result.states)
+        b = s.shape[0]
+        codes = np.empty(b, dtype=np.int64)
+        ks = np.empty(b, dtype=np.int64)
+        classify_batch(s, np.broadcast_to(self.classify_params, (b, N_CLASSIFY_PARAMS)), codes, ks)
+        return codes, ks
 
     def bank_ok(self) -> np.ndarray:
         """(174,) bool: primitives whose coordinated-turn bank stays within ``max_bank_deg``."""

@@ -65,6 +65,10 @@ class PrimitiveLibrary:
     duration: float = 30.0
     n_points: int = 30
     table: np.ndarray = field(init=False, repr=False, compare=False)
+    #: (174, 4) kernel control rows ``(v_a, gamma, chi_dot_1, chi_dot_2)``; treat as constant.
+    kernel_rows: np.ndarray = field(init=False, repr=False, compare=False)
+    #: the same rows as 174 separate (1, 4) arrays, for single-edge calls without allocation.
+    kernel_row: tuple[np.ndarray, ...] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         check_positive("duration", self.duration)
@@ -92,6 +96,11 @@ class PrimitiveLibrary:
         assert table.shape == (N_PRIMITIVES, 5)
         table.setflags(write=False)
         object.__setattr__(self, "table", table)
+        # Kernel control rows (v_a, gamma, chi_dot_1, chi_dot_2). Writable on purpose, like every
+        # array handed to the kernel: numba compiles another specialization for read-only arrays.
+        rows_k = np.ascontiguousarray(table[:, [COL_AIRSPEED, COL_GAMMA, COL_CHI_DOT_1, COL_CHI_DOT_2]])
+        object.__setattr__(self, "kernel_rows", rows_k)
+        object.__setattr__(self, "kernel_row", tuple(rows_k[i : i + 1].copy() for i in range(N_PRIMITIVES)))
 
     def __len__(self) -> int:
         return N_PRIMITIVES
@@ -199,8 +208,7 @@ def rollout(
                 f"primitive={primitive!r} is invalid; allowed: an integer or 1-D integer array in 0..{N_PRIMITIVES - 1}"
             )
         b = _batch(x.shape[0], idx.size if idx.ndim else 1, "primitive")
-        rows = lib.table[np.broadcast_to(idx, (b,))]
-        ctrl = np.ascontiguousarray(rows[:, [COL_AIRSPEED, COL_GAMMA, COL_CHI_DOT_1, COL_CHI_DOT_2]])
+        ctrl = lib.kernel_rows[np.broadcast_to(idx, (b,))]
     else:
         u = np.asarray(control, dtype=np.float64)
         if u.ndim == 1:
@@ -228,31 +236,15 @@ def rollout(
             raise ConfigError(
                 f"airspeed_prev={airspeed_prev!r} must be > 0 m/s and finite, or NaN/None for 'no previous edge'"
             )
-    n_pts = lib.n_points
-    x = np.broadcast_to(x, (b, 4))
-    out_states = np.empty((b, n_pts, 4))
-    out_terms = np.empty((b, 6))
-    dvx, dvy = (field.wind_north, field.wind_east) if field.drift else (0.0, 0.0)
-    _rollout_kernel(
-        np.ascontiguousarray(x),
-        t0a,
-        ctrl,
-        np.ascontiguousarray(vp),
-        dur,
-        n_pts,
-        n_pts // 2,
-        max_substep,
-        field.packed,
-        field.model_code,
-        field.zi,
-        field.wind_north,
-        field.wind_east,
-        dvx,
-        dvy,
-        aircraft.packed(),
-        out_states,
-        out_terms,
+    prop = Propagator(field, aircraft, lib, max_substep, dur)
+    # Fresh writable C-contiguous copies: the kernel must always see the same array flags.
+    out_states, out_terms = prop.run(
+        np.array(np.broadcast_to(x, (b, 4)), dtype=np.float64, order="C"),
+        np.array(t0a, dtype=np.float64, order="C"),
+        np.array(vp, dtype=np.float64, order="C"),
+        np.array(ctrl, dtype=np.float64, order="C"),
     )
+    n_pts = lib.n_points
     return Rollout(
         states=out_states,
         times=dur * np.arange(1, n_pts + 1) / n_pts,
@@ -264,6 +256,54 @@ def rollout(
         max_bank=out_terms[:, 4],
         min_height=out_terms[:, 5],
     )
+
+
+class Propagator:
+    """The kernel arguments of one (field, aircraft, library, substep) packed once: the fast entry
+    point behind :func:`rollout`, for callers that step many edges of one scenario (the envs).
+
+    :meth:`run` does no validation: pass C-contiguous, writable float64 arrays -- ``x0`` (B, 4)
+    start states, ``t0`` (B,) start times [s], ``v_prev`` (B,) previous airspeeds [m/s] (NaN: none),
+    ``ctrl`` (B, 4) kernel rows ``(v_a [m/s], gamma [rad], chi_dot_1, chi_dot_2 [rad/s])`` (see
+    :attr:`PrimitiveLibrary.kernel_rows`). It returns ``states`` (B, N, 4) and ``terms`` (B, 6) =
+    (fuel, potential, kinetic, cost [J/kg], max bank [rad], min height [m]).
+    """
+
+    def __init__(
+        self,
+        field: WindField,
+        aircraft: Aircraft,
+        library: PrimitiveLibrary | None = None,
+        max_substep: float = DEFAULT_MAX_SUBSTEP,
+        duration: float | None = None,
+    ) -> None:
+        lib = library if library is not None else _default_library()
+        self.library = lib
+        self.n_points = lib.n_points
+        self.duration = lib.duration if duration is None else duration
+        self.ctrl_table = lib.kernel_rows
+        self.ctrl_rows = lib.kernel_row
+        dvx, dvy = (field.wind_north, field.wind_east) if field.drift else (0.0, 0.0)
+        self._pre = (self.duration, lib.n_points, lib.n_points // 2, max_substep)
+        self._post = (
+            field.packed,
+            field.model_code,
+            field.zi,
+            field.wind_north,
+            field.wind_east,
+            dvx,
+            dvy,
+            aircraft.packed(),
+        )
+
+    def run(
+        self, x0: np.ndarray, t0: np.ndarray, v_prev: np.ndarray, ctrl: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        b = x0.shape[0]
+        out = np.empty((b, self.n_points, 4))
+        terms = np.empty((b, 6))
+        _rollout_kernel(x0, t0, ctrl, v_prev, *self._pre, *self._post, out, terms)
+        return out, terms
 
 
 def _batch(n_states: int, n_controls: int, what: str) -> int:

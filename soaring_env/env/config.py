@@ -1,0 +1,190 @@
+"""Typed, frozen configuration of the soaring environments and scenario resolution.
+
+:class:`SoaringEnvConfig` is what ``gym.make("soaring/Soaring-v0", config=...)`` accepts; plain
+keyword arguments to ``gym.make`` override single fields (``gym.make(id, goal_bonus=10.0)``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from soaring_env._validation import ConfigError, check_finite, check_int, check_positive, check_range
+from soaring_env.physics.aircraft import Aircraft
+from soaring_env.primitives import DEFAULT_MAX_SUBSTEP
+from soaring_env.scenario import SCENARIOS, Scenario, get_scenario, make_scenario
+
+#: Reward scale: one reward unit is one kJ/kg of specific energy.
+ENERGY_SCALE = 1000.0
+
+#: Scenario mode that draws a new random scenario from ``env.np_random`` at every reset.
+RANDOM = "random"
+
+ScenarioSpec = str | Scenario | Mapping[str, Any]
+
+
+@dataclass(frozen=True)
+class SoaringEnvConfig:
+    """Everything that defines a soaring environment (all fields validated on construction).
+
+    :param scenario: ``"paper"`` (default: the paper's figure-2 setting, one thermal between start
+        and goal), another named scenario, ``"random"`` (a new scenario drawn from
+        ``env.np_random`` with :func:`soaring_env.scenario.make_scenario` at every reset), a
+        :class:`~soaring_env.scenario.Scenario`, or its dict/JSON form.
+    :param random_scenario: keyword arguments for :func:`~soaring_env.scenario.make_scenario` in
+        ``"random"`` mode (thermal count, strength and wind ranges, bounds, ...).
+    :param duration: primitive duration Ts [s]: one env step flies Ts seconds.
+    :param n_points: output points per primitive N (events are detected on these points).
+    :param aircraft: aircraft and thrust model (default: Tempest UAS, ``"trim"`` thrust).
+    :param max_substep: largest RK4 substep of the updraft integration near thermals [s].
+    :param max_bank_deg: bank-angle limit [deg] of :meth:`SoaringEnv.action_masks`.
+    :param observe_thermals: include the nearest thermals in the observation; ``False`` leaves only
+        locally sensed lift (a harder, partially observed task).
+    :param n_obs_thermals: number of nearest-thermal slots in the observation.
+    :param position_scale: horizontal distances are divided by this [m] (default 1 km).
+    :param height_scale: heights are divided by this [m] (default 1 km).
+    :param updraft_scale: vertical winds are divided by this [m/s].
+    :param speed_scale: airspeeds are divided by this [m/s].
+    :param wind_scale: horizontal winds are divided by this [m/s].
+    :param goal_bonus: reward added when the goal region is reached [kJ/kg-equivalent]. The energy
+        rewards of an episode sum to ``-(fuel + kinetic) + g (h_end - h_start)``, so height kept at
+        the end pays; the bonus must beat ending high instead of at the goal (g x 1.3 km = 12.7).
+    :param crash_penalty: reward subtracted on ground contact (the height lost on the way down is
+        already charged as potential energy; the penalty makes a crash worse than any flight).
+    :param out_of_bounds_penalty: reward subtracted on leaving the flight domain.
+    :param progress_weight: potential-based shaping [reward per km]: each step adds
+        ``progress_weight * (d_before - d_after) / 1 km`` with ``d`` the 3-D distance to the goal
+        centre; it telescopes, so it changes no optimal policy (gamma = 1). 0 switches it off.
+    :param render_size: (width, height) of ``rgb_array`` frames [px].
+    """
+
+    scenario: str | Scenario | Mapping[str, Any] = "paper"
+    random_scenario: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    duration: float = 30.0
+    n_points: int = 30
+    aircraft: Aircraft = dataclasses.field(default_factory=Aircraft)
+    max_substep: float = DEFAULT_MAX_SUBSTEP
+    max_bank_deg: float = 60.0
+    observe_thermals: bool = True
+    n_obs_thermals: int = 3
+    position_scale: float = 1000.0
+    height_scale: float = 1000.0
+    updraft_scale: float = 5.0
+    speed_scale: float = 20.0
+    wind_scale: float = 10.0
+    goal_bonus: float = 25.0
+    crash_penalty: float = 25.0
+    out_of_bounds_penalty: float = 25.0
+    progress_weight: float = 1.0
+    render_size: tuple[int, int] = (960, 640)
+
+    def __post_init__(self) -> None:
+        if isinstance(self.scenario, str):
+            if self.scenario != RANDOM and self.scenario not in SCENARIOS:
+                known = ", ".join(repr(s) for s in [*sorted(SCENARIOS), RANDOM])
+                raise ConfigError(f"scenario={self.scenario!r} is unknown; allowed: {known}, a Scenario or a dict")
+        elif not isinstance(self.scenario, (Scenario, Mapping)):
+            raise ConfigError(
+                f"scenario={self.scenario!r} has type {type(self.scenario).__name__}; "
+                "allowed: a scenario name, 'random', a Scenario or a dict"
+            )
+        if not isinstance(self.random_scenario, Mapping):
+            raise ConfigError(f"random_scenario={self.random_scenario!r} must be a dict of make_scenario keywords")
+        allowed = [p for p in inspect.signature(make_scenario).parameters if p != "rng"]
+        unknown = sorted(set(self.random_scenario) - set(allowed))
+        if unknown:
+            raise ConfigError(f"random_scenario has unknown key(s) {unknown!r}; allowed: {', '.join(allowed)}")
+        if self.scenario == RANDOM or self.random_scenario:
+            make_scenario(np.random.default_rng(0), **dict(self.random_scenario))  # fail early on bad ranges
+        check_positive("duration", self.duration)
+        check_int("n_points", self.n_points, 2)
+        if not isinstance(self.aircraft, Aircraft):
+            raise ConfigError(f"aircraft={self.aircraft!r} must be an Aircraft")
+        check_positive("max_substep", self.max_substep)
+        check_range("max_bank_deg", self.max_bank_deg, 0.0, 90.0, low_open=True, high_open=True)
+        if not isinstance(self.observe_thermals, bool):
+            raise ConfigError(f"observe_thermals={self.observe_thermals!r} must be a bool")
+        check_int("n_obs_thermals", self.n_obs_thermals, 0)
+        for name in ("position_scale", "height_scale", "updraft_scale", "speed_scale", "wind_scale"):
+            check_positive(name, getattr(self, name))
+        for name in ("goal_bonus", "crash_penalty", "out_of_bounds_penalty", "progress_weight"):
+            check_finite(name, getattr(self, name))
+        size = tuple(self.render_size)
+        if len(size) != 2 or any(isinstance(s, bool) or not isinstance(s, int) or s < 64 for s in size):
+            raise ConfigError(f"render_size={self.render_size!r} must be (width, height) in pixels, each >= 64")
+        object.__setattr__(self, "render_size", size)
+        # Fail early on a bad pinned scenario or bad random-scenario keywords.
+        resolve_scenario(self.scenario)
+
+    @classmethod
+    def field_names(cls) -> tuple[str, ...]:
+        return tuple(f.name for f in dataclasses.fields(cls))
+
+    def replace(self, **changes: Any) -> SoaringEnvConfig:
+        """A copy with some fields changed; unknown names raise with the list of fields."""
+        unknown = sorted(set(changes) - set(self.field_names()))
+        if unknown:
+            raise ConfigError(
+                f"unknown config field(s) {', '.join(map(repr, unknown))}; allowed: {', '.join(self.field_names())}"
+            )
+        return dataclasses.replace(self, **changes)
+
+
+def make_config(config: SoaringEnvConfig | Mapping[str, Any] | None, overrides: Mapping[str, Any]) -> SoaringEnvConfig:
+    """Combine a config (or a dict of fields, or None for defaults) with keyword overrides."""
+    if config is None:
+        base = SoaringEnvConfig()
+    elif isinstance(config, SoaringEnvConfig):
+        base = config
+    elif isinstance(config, Mapping):
+        base = SoaringEnvConfig().replace(**dict(config))
+    else:
+        raise ConfigError(f"config={config!r} must be a SoaringEnvConfig, a dict of its fields or None")
+    return base.replace(**dict(overrides)) if overrides else base
+
+
+def resolve_scenario(spec: ScenarioSpec) -> Scenario | None:
+    """A :class:`Scenario` from a name, dict or Scenario; ``None`` for ``"random"``."""
+    if isinstance(spec, Scenario):
+        return spec
+    if isinstance(spec, str):
+        if spec == RANDOM:
+            return None
+        return get_scenario(spec)
+    if isinstance(spec, Mapping):
+        return Scenario.from_dict(dict(spec))
+    raise ConfigError(f"scenario={spec!r} is invalid; allowed: a scenario name, 'random', a Scenario or a dict")
+
+
+def choose_scenario(
+    options: Mapping[str, Any] | None,
+    fixed: Scenario | None,
+    random_kwargs: Mapping[str, Any],
+    rng: Callable[[], np.random.Generator],
+) -> Scenario:
+    """The scenario of a new episode.
+
+    ``options["scenario"]`` (a Scenario, name, dict or ``"random"``) wins; else the configured
+    ``fixed`` scenario; else (``"random"`` mode) a scenario drawn from ``rng()`` with
+    :func:`~soaring_env.scenario.make_scenario` and ``random_kwargs``.
+    """
+    spec: Any = None
+    if options:
+        if not isinstance(options, Mapping):
+            raise ConfigError(f"options={options!r} must be a dict; allowed key: 'scenario'")
+        unknown = sorted(set(options) - {"scenario"})
+        if unknown:
+            raise ConfigError(f"unknown reset option(s) {unknown!r}; allowed: 'scenario'")
+        spec = options.get("scenario")
+    if spec is not None:
+        pinned = resolve_scenario(spec)  # None for "random"
+        if pinned is not None:
+            return pinned
+    elif fixed is not None:
+        return fixed
+    return make_scenario(rng(), **dict(random_kwargs))

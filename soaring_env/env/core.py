@@ -1,0 +1,517 @@
+"""The Gymnasium environments: discrete motion primitives and continuous controls.
+
+Both are thin shells over the model API (:class:`soaring_env.model.SoaringModel`): ``step`` rolls
+out one edge of duration Ts from the current state with the project's rollout kernel, classifies
+it (goal / crash / out of bounds / flying) and charges the full edge cost.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, ClassVar, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from soaring_env._validation import ConfigError
+from soaring_env.env._kernels import CRASH, FLYING, GOAL, OUT_OF_BOUNDS, post_step
+from soaring_env.env.config import ENERGY_SCALE, SoaringEnvConfig, choose_scenario, make_config, resolve_scenario
+from soaring_env.env.observation import observation_layout, observe_batch, scenario_params
+from soaring_env.model import OUTCOMES, SoaringModel
+from soaring_env.physics.thermals import WindField
+from soaring_env.primitives import N_PRIMITIVES, PrimitiveLibrary
+from soaring_env.scenario import Scenario, get_scenario
+
+#: Progress shaping is counted per km of distance to the goal centre.
+PROGRESS_SCALE = 1000.0
+_ZERO_ROW = np.zeros(1, dtype=np.int64)
+
+
+class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
+    """Energy-aware flight of a small powered glider to a goal region through thermal updrafts.
+
+    ## Description
+
+    A fixed-wing UAS (the Tempest: 6.4 kg, 3.3 m span, electric motor) must fly from a start state
+    to a spherical goal region while spending as little specific energy [J/kg] as possible. It can
+    harvest thermal updrafts (Allen 2006 or Gaussian thermals): circling in lift gains height for
+    less motor energy than climbing does. This is the setting of Ryu et al., "energy-aware path
+    planning ... with motion primitives": each step flies one of the paper's 174 motion
+    primitives (straight, curve, spiral, spline) for Ts = 30 s -- or, in
+    ``soaring/SoaringContinuous-v0``, holds a continuous control for Ts.
+
+    The model behind the env is reachable as ``env.unwrapped.model`` (a
+    :class:`~soaring_env.model.SoaringModel`): it rolls out any primitive or control from any
+    state without touching the env, and ``step`` uses exactly its numbers, so a plan made with the
+    model (e.g. by the SST planner) replays through ``step`` bit for bit. ``env.unwrapped.scenario``
+    is the current :class:`~soaring_env.scenario.Scenario`, ``env.unwrapped.field`` its thermal
+    field, ``env.unwrapped.state`` the state ``[Pn, Pe, chi, h]`` (float64, [m, m, rad, m]),
+    ``env.unwrapped.time`` the flight time [s] and ``env.unwrapped.airspeed_prev`` the airspeed of
+    the last edge [m/s] (NaN after reset: the first edge pays no speed-change term).
+
+    ## Action Space
+
+    ``soaring/Soaring-v0``: ``Discrete(174)``, the index of a motion primitive (order documented
+    in :class:`~soaring_env.primitives.PrimitiveLibrary`; ``env.unwrapped.model.library.describe(i)``):
+
+    | index   | family   | airspeed [m/s] | path angle [deg]     | turn over Ts [deg]                        |
+    |---------|----------|----------------|----------------------|-------------------------------------------|
+    | 0-9     | straight | 10, 20         | -45, -15, 0, 15, 45  | 0                                         |
+    | 10-69   | curve    | 10, 20         | -45, -15, 0, 15, 45  | +-30, +-60, +-90                          |
+    | 70-149  | spiral   | 10, 20         | -45, -15, 0, 15, 45  | +-180, +-360, +-720, +-1080               |
+    | 150-173 | spline   | 10, 20         | 0                    | two of +-60, +-90 (first / second half)   |
+
+    :meth:`action_masks` (for sb3-contrib's ``MaskablePPO``) masks primitives that would hit the
+    ground, leave the domain or exceed the bank-angle limit.
+
+    ``soaring/SoaringContinuous-v0``: ``Box(-1, 1, (3,), float32)``, mapped affinely onto the
+    envelope of the primitives and held for Ts:
+
+    | idx | control                  | -1           | +1          | unit  |
+    |-----|--------------------------|--------------|-------------|-------|
+    | 0   | airspeed v_a             | 10           | 20          | m/s   |
+    | 1   | course rate chi_dot      | -1080 / Ts   | 1080 / Ts   | deg/s |
+    | 2   | flight-path angle gamma  | -45          | 45          | deg   |
+
+    ## Observation Space
+
+    ``Box(float32)`` with finite bounds; every entry is clipped into them. Default scales: 1 km
+    (distances, heights), 5 m/s (vertical winds), 20 m/s (airspeed), 10 m/s (horizontal wind).
+    ``env.unwrapped.observation_names`` lists the entries.
+
+    | idx     | observation                                             | unit (before scaling) | bounds    |
+    |---------|---------------------------------------------------------|-----------------------|-----------|
+    | 0, 1    | goal centre minus position, north / east                | m                     | +-10      |
+    | 2       | goal height minus height                                | m                     | +-3       |
+    | 3, 4    | sin, cos of the course chi                              | -                     | +-1       |
+    | 5       | height h                                                | m                     | [-1, 3]   |
+    | 6       | updraft w_up at the aircraft                            | m/s                   | +-4       |
+    | 7       | mean updraft along the last edge (0 after reset)        | m/s                   | +-4       |
+    | 8       | airspeed of the last edge (0 after reset)               | m/s                   | [0, 2]    |
+    | 9, 10   | ambient wind, north / east                              | m/s                   | +-4       |
+    | 11+5j   | slot j holds a thermal (1) or is empty (0, all zeros)   | -                     | [0, 1]    |
+    | 12+5j,  | thermal centre minus position, north / east             | m                     | +-10      |
+    | 13+5j   |                                                         |                       |           |
+    | 14+5j   | peak updraft of the thermal at the aircraft's height    | m/s                   | [0, 4]    |
+    | 15+5j   | updraft radius at that height (Allen r2, Gaussian R)    | m                     | [0, 4]    |
+
+    Slots j = 0 .. K-1 (``n_obs_thermals``, default 3) hold the nearest thermals, nearest first.
+    With ``observe_thermals=False`` the observation is only entries 0-10: the agent senses lift
+    locally (entries 6-7) and must find thermals itself -- a partially observed task.
+
+    ## Rewards
+
+    Reward units are kJ/kg of specific energy. Each step gives the sum of these terms, each also
+    reported in ``info["reward_terms"]``:
+
+    - ``energy``: ``-edge_cost / 1000``, the negative net specific energy spent on the edge
+      (motor energy + potential energy lost + kinetic energy added). Positive in strong lift.
+    - ``progress``: ``progress_weight * (d_before - d_after) / 1 km`` with d the 3-D distance to
+      the goal centre (potential-based shaping; default weight 1; 0 turns it off).
+    - ``goal``: ``+goal_bonus`` (default 25) on reaching the goal region.
+    - ``crash``: ``-crash_penalty`` (default 25) on ground contact.
+    - ``out_of_bounds``: ``-out_of_bounds_penalty`` (default 25) on leaving the flight domain.
+
+    The full edge cost is charged even when the edge ends early at an event.
+
+    ## Starting State
+
+    The scenario's start state: in the default ``"paper"`` scenario ``[0, 0, 0, 300]`` (origin,
+    heading north, 300 m), goal 3 km north at 300 m (radius 150 m), one Allen thermal
+    (w* = 2.56 m/s, zi = 1400 m) 1.5 km north, 250 m east. With ``scenario="random"`` every reset
+    draws thermal count, positions, strengths, wind, start and goal from ``env.np_random``.
+    ``reset(options={"scenario": s})`` pins a scenario (a Scenario, a name, its dict, or
+    ``"random"``) for that episode.
+
+    ## Episode End
+
+    Each step flies Ts = 30 s and checks N = 30 points along the edge; at the first point that is
+
+    1. inside the goal region -- terminated, success (``info["is_success"]`` True);
+    2. at or below the ground (h <= 0) -- terminated (crash);
+    3. outside the flight domain (horizontal bounds or the ceiling) -- terminated.
+
+    The new state is that event point (else the edge's end). Truncation happens only through the
+    registered ``max_episode_steps`` (40 steps = 20 min of flight).
+
+    ## Information
+
+    ``info`` (Python floats, SI units): ``energy_spent`` (cumulative, J/kg), ``edge_cost``,
+    ``fuel``, ``potential``, ``kinetic`` (the edge's terms, J/kg; ``edge_cost`` is their sum),
+    ``height`` [m], ``airspeed`` [m/s], ``bank_angle`` (largest along the edge, rad), ``updraft``
+    (at the new position, m/s), ``time`` [s], ``outcome`` (``"flying"``, ``"goal"``, ``"crash"``,
+    ``"out_of_bounds"``), ``is_success`` (bool), ``reward_terms`` (dict). ``reset`` returns
+    ``energy_spent``, ``height``, ``updraft``, ``time``, ``outcome``, ``is_success``, ``scenario``.
+
+    ## Arguments
+
+    ```python
+    import gymnasium as gym
+    import soaring_env
+    env = gym.make("soaring/Soaring-v0", render_mode="rgb_array")          # defaults
+    env = gym.make("soaring/Soaring-v0", scenario="random", observe_thermals=False)
+    env = gym.make("soaring/Soaring-v0", config=soaring_env.SoaringEnvConfig(goal_bonus=50.0))
+    ```
+
+    ``config`` is a :class:`~soaring_env.env.config.SoaringEnvConfig` (or a dict of its fields);
+    keyword arguments override single fields. ``render_mode`` is ``None``, ``"rgb_array"``
+    (uint8 H x W x 3 frames, headless) or ``"human"`` (a matplotlib window).
+
+    ## Version History
+
+    * v0: initial version.
+    """
+
+    metadata: dict[str, Any] = {"render_modes": ["human", "rgb_array"], "render_fps": 4}  # noqa: RUF012
+    continuous: ClassVar[bool] = False
+
+    def __init__(
+        self,
+        config: SoaringEnvConfig | dict[str, Any] | None = None,
+        render_mode: str | None = None,
+        **overrides: Any,
+    ) -> None:
+        cfg = make_config(config, overrides)
+        self.config = cfg
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ConfigError(
+                f"render_mode={render_mode!r} is not supported; allowed: None, "
+                + ", ".join(repr(m) for m in self.metadata["render_modes"])
+            )
+        self.render_mode = render_mode
+        self.library = PrimitiveLibrary(duration=cfg.duration, n_points=cfg.n_points)
+        self._fixed_scenario = resolve_scenario(cfg.scenario)
+        names, low, high = observation_layout(cfg.observe_thermals, cfg.n_obs_thermals)
+        self.observation_names: list[str] = names
+        self.observation_space = spaces.Box(low, high, dtype=np.float32)
+        self._n_obs = len(names)
+        self.action_space = self._make_action_space()
+        self._low, self._high = low, high
+        self._scales = np.array(
+            [cfg.position_scale, cfg.height_scale, cfg.updraft_scale, cfg.speed_scale, cfg.wind_scale]
+        )
+        self._k_obs = cfg.n_obs_thermals if cfg.observe_thermals else 0
+        self._ts = float(self.library.duration)
+        self._dt = self.library.duration / self.library.n_points
+        self._w_progress = float(cfg.progress_weight)
+        self._r_goal = float(cfg.goal_bonus)
+        self._r_crash = -float(cfg.crash_penalty)
+        self._r_oob = -float(cfg.out_of_bounds_penalty)
+        # scratch buffers of the hot path (copied into Python floats before step returns)
+        self._t0 = np.zeros(1)
+        self._vp = np.full(1, np.nan)
+        self._tn = np.zeros(1)
+        self._codes = np.zeros(1, dtype=np.int64)
+        self._ks = np.zeros(1, dtype=np.int64)
+        self._upd = np.zeros(1)
+        self._lift = np.zeros(1)
+        self._dist = np.zeros(1)
+        self._ctrl = np.zeros((1, 4))
+        self._x0 = np.zeros((1, 4))
+        self.scenario: Scenario = self._fixed_scenario or get_scenario("paper")
+        self._install(self.scenario)
+        self._start_episode()
+        self._needs_reset = True
+        self._renderer: Any = None
+
+    # --- public attributes of the contract -------------------------------------------------------
+    @property
+    def field(self) -> WindField:
+        """The current thermal field and ambient wind (``scenario.field``)."""
+        return self.scenario.field
+
+    @property
+    def path(self) -> np.ndarray:
+        """Every flown point of the episode so far, (M, 4) ``[Pn, Pe, chi, h]``, start included."""
+        return np.concatenate(self._path, axis=0)
+
+    def _make_action_space(self) -> spaces.Space:
+        raise NotImplementedError
+
+    # --- scenario handling -----------------------------------------------------------------------
+    def _install(self, sc: Scenario) -> None:
+        """Make ``sc`` the current scenario: model, propagator and packed kernel arguments."""
+        cfg = self.config
+        self.scenario = sc
+        self.model = SoaringModel(
+            scenario=sc,
+            aircraft=cfg.aircraft,
+            library=self.library,
+            max_substep=cfg.max_substep,
+            max_bank_deg=cfg.max_bank_deg,
+        )
+        self._prop = self.model.propagator
+        self._prm = scenario_params(sc)[None, :]
+        self._th = np.ascontiguousarray(sc.field.packed[None, :, :])
+        self._nth = np.array([len(sc.field.thermals)], dtype=np.int64)
+        self._bank_ok = self.model.bank_ok()
+
+    def _start_episode(self) -> tuple[np.ndarray, dict[str, Any]]:
+        sc = self.scenario
+        self.state = sc.start_state
+        self.time = 0.0
+        self.airspeed_prev = math.nan
+        self.energy_spent = 0.0
+        self.steps = 0
+        self.outcome = "flying"
+        self._lift[0] = 0.0
+        obs = np.empty((1, self._n_obs), dtype=np.float32)
+        observe_batch(
+            self.state[None, :],
+            np.zeros(1),
+            np.full(1, np.nan),
+            self._lift,
+            self._prm,
+            self._th,
+            self._nth,
+            self._scales,
+            self._k_obs,
+            self._low,
+            self._high,
+            _ZERO_ROW,
+            self._upd,
+            self._dist,
+            obs,
+        )
+        self._d_goal = float(self._dist[0])
+        self.updraft = float(self._upd[0])
+        self._path: list[np.ndarray] = [self.state[None, :].copy()]
+        self.history: dict[str, list[float]] = {
+            "time": [0.0],
+            "height": [float(self.state[3])],
+            "energy_spent": [0.0],
+            "updraft": [self.updraft],
+        }
+        info = {
+            "energy_spent": 0.0,
+            "height": float(self.state[3]),
+            "updraft": self.updraft,
+            "time": 0.0,
+            "outcome": "flying",
+            "is_success": False,
+            "scenario": sc.name,
+        }
+        return obs[0], info
+
+    # --- gymnasium API -------------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
+        """Start an episode; ``options={"scenario": Scenario | name | dict | "random"}`` pins a scenario."""
+        super().reset(seed=seed)
+        sc = choose_scenario(options, self._fixed_scenario, self.config.random_scenario, lambda: self.np_random)
+        if sc is not self.scenario:
+            self._install(sc)
+        obs, info = self._start_episode()
+        self._needs_reset = False
+        if self.render_mode == "human":
+            self.render()
+        return obs, info
+
+    def _advance(self, ctrl: np.ndarray, primitive: int | None) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        if self._needs_reset:
+            raise RuntimeError(
+                "step() called before reset() or after the episode ended (terminated); call reset() first"
+            )
+        x0 = self._x0  # a writable buffer: see primitives.Propagator
+        x0[0, :] = self.state
+        self._t0[0] = self.time
+        self._vp[0] = self.airspeed_prev
+        out, terms = self._prop.run(x0, self._t0, self._vp, ctrl)
+        t_new = self.time + self._ts
+        self._tn[0] = t_new
+        obs = np.empty((1, self._n_obs), dtype=np.float32)
+        new_state = np.empty((1, 4))
+        post_step(
+            out,
+            x0,
+            ctrl,
+            self._dt,
+            self._tn,
+            self._prm,
+            self._th,
+            self._nth,
+            self._scales,
+            self._k_obs,
+            self._low,
+            self._high,
+            self._codes,
+            self._ks,
+            new_state,
+            self._upd,
+            self._lift,
+            self._dist,
+            obs,
+        )
+        code = int(self._codes[0])
+        k = int(self._ks[0])
+        fuel, potential, kinetic, cost, bank, _ = terms[0].tolist()
+        airspeed = float(ctrl[0, 0])
+        d_new = float(self._dist[0])
+        updraft = float(self._upd[0])
+        self.state = new_state[0]
+        self.time = t_new
+        self.airspeed_prev = airspeed
+        self.energy_spent += cost
+        self.steps += 1
+        self.updraft = updraft
+        outcome = OUTCOMES[code]
+        self.outcome = outcome
+        r_energy = -cost / ENERGY_SCALE
+        r_progress = self._w_progress * (self._d_goal - d_new) / PROGRESS_SCALE
+        r_goal = self._r_goal if code == GOAL else 0.0
+        r_crash = self._r_crash if code == CRASH else 0.0
+        r_oob = self._r_oob if code == OUT_OF_BOUNDS else 0.0
+        reward = r_energy + r_progress + r_goal + r_crash + r_oob
+        self._d_goal = d_new
+        terminated = code != FLYING
+        self._needs_reset = terminated
+        h = float(new_state[0, 3])
+        self._path.append(out[0, : k + 1])
+        hist = self.history
+        hist["time"].append(t_new)
+        hist["height"].append(h)
+        hist["energy_spent"].append(self.energy_spent)
+        hist["updraft"].append(updraft)
+        info = {
+            "energy_spent": self.energy_spent,
+            "edge_cost": cost,
+            "fuel": fuel,
+            "potential": potential,
+            "kinetic": kinetic,
+            "height": h,
+            "airspeed": airspeed,
+            "bank_angle": bank,
+            "updraft": updraft,
+            "time": t_new,
+            "outcome": outcome,
+            "is_success": code == GOAL,
+            "reward_terms": {
+                "energy": r_energy,
+                "progress": r_progress,
+                "goal": r_goal,
+                "crash": r_crash,
+                "out_of_bounds": r_oob,
+            },
+        }
+        if self.render_mode == "human":
+            self.render()
+        return obs[0], reward, terminated, False, info
+
+    # --- rendering -----------------------------------------------------------------------------------
+    def render(self) -> np.ndarray | None:
+        """``rgb_array``: a uint8 (H, W, 3) frame; ``human``: draw into a window, return None."""
+        if self.render_mode is None:
+            gym.logger.warn(
+                "render() called without a render mode; pass render_mode='rgb_array' or 'human' to gym.make"
+            )
+            return None
+        if self._renderer is None:
+            from soaring_env.env.rendering import Renderer
+
+            self._renderer = Renderer(self.config.render_size, human=self.render_mode == "human")
+        frame = self._renderer.draw(self)
+        return frame if self.render_mode == "rgb_array" else None
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    # --- helpers -------------------------------------------------------------------------------------
+    def decode_observation(self, obs: np.ndarray) -> dict[str, float]:
+        """The observation as ``{name: value}`` (scaled values, see the class docstring)."""
+        return {n: float(v) for n, v in zip(self.observation_names, np.asarray(obs).ravel(), strict=True)}
+
+
+class SoaringEnv(SoaringBaseEnv):
+    __doc__ = SoaringBaseEnv.__doc__
+    continuous: ClassVar[bool] = False
+
+    def _make_action_space(self) -> spaces.Space:
+        return spaces.Discrete(N_PRIMITIVES)
+
+    def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
+        """Fly primitive ``action`` for Ts; see the class docstring for rewards and episode end."""
+        idx = self._action_index(action)
+        return self._advance(self._prop.ctrl_rows[idx], idx)
+
+    def _action_index(self, action: Any) -> int:
+        if type(action) is int:
+            idx = action
+        elif isinstance(action, np.integer):
+            idx = int(action)
+        elif isinstance(action, np.ndarray) and action.shape == () and action.dtype.kind in "iu":
+            idx = int(action)
+        else:
+            raise ConfigError(
+                f"action={action!r} (type {type(action).__name__}) is invalid; "
+                f"allowed: an integer primitive index in 0..{N_PRIMITIVES - 1} (Discrete({N_PRIMITIVES}))"
+            )
+        if not 0 <= idx < N_PRIMITIVES:
+            raise ConfigError(
+                f"action={idx} is out of range; allowed: 0..{N_PRIMITIVES - 1} (Discrete({N_PRIMITIVES}))"
+            )
+        return idx
+
+    # --- action masking ------------------------------------------------------------------------------
+    def action_masks(self) -> np.ndarray:
+        """(174,) bool: True for primitives that neither hit the ground, nor leave the domain, nor
+        exceed ``max_bank_deg``, rolled out from the current state in one batched model call.
+
+        Never all False: if every primitive is invalid, the bank-feasible primitives whose first
+        event comes latest along the edge (they stay airborne and inside longest) are unmasked.
+        """
+        m = self.model
+        r = m.rollout_primitive(self.state, np.arange(N_PRIMITIVES), t0=self.time, airspeed_prev=self.airspeed_prev)
+        code, k = m.classify(r)
+        valid = (code != CRASH) & (code != OUT_OF_BOUNDS) & self._bank_ok
+        if not valid.any():
+            kk = np.where(self._bank_ok, k, -1)
+            valid = kk == kk.max()
+        return valid
+
+
+class SoaringContinuousEnv(SoaringBaseEnv):
+    __doc__ = SoaringBaseEnv.__doc__
+    continuous: ClassVar[bool] = True
+
+    def _make_action_space(self) -> spaces.Space:
+        return spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
+
+    def _install(self, sc: Scenario) -> None:
+        super()._install(sc)
+        lo, hi = self.library.control_bounds()
+        self._c_lo = lo.tolist()
+        self._c_span = (hi - lo).tolist()
+
+    def action_to_control(self, action: Any) -> tuple[float, float, float]:
+        """Validate a normalized action and map it like ``model.action_to_control`` (same floats):
+        returns ``(v_a [m/s], chi_dot [rad/s], gamma [rad])``."""
+        a = action if isinstance(action, np.ndarray) else np.asarray(action)
+        if a.shape != (3,) or a.dtype.kind not in "fiu":
+            raise ConfigError(
+                f"action={action!r} has shape {a.shape} and dtype {a.dtype}; allowed: a real array of shape (3,) "
+                "in [-1, 1] (v_a, chi_dot, gamma), Box(-1, 1, (3,), float32)"
+            )
+        a0, a1, a2 = a.tolist()
+        if not (-1.0 <= a0 <= 1.0 and -1.0 <= a1 <= 1.0 and -1.0 <= a2 <= 1.0):
+            raise ConfigError(
+                f"action={a.tolist()!r} is outside the action space; allowed: finite values in [-1, 1] "
+                "for (v_a, chi_dot, gamma)"
+            )
+        lo, sp = self._c_lo, self._c_span
+        return (
+            lo[0] + 0.5 * (a0 + 1.0) * sp[0],
+            lo[1] + 0.5 * (a1 + 1.0) * sp[1],
+            lo[2] + 0.5 * (a2 + 1.0) * sp[2],
+        )
+
+    def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
+        """Hold the control ``action`` (normalized v_a, chi_dot, gamma) for Ts."""
+        v, chi_dot, gamma = self.action_to_control(action)
+        c = self._ctrl
+        c[0, 0] = v
+        c[0, 1] = gamma
+        c[0, 2] = chi_dot
+        c[0, 3] = chi_dot
+        return self._advance(c, None)

@@ -1,0 +1,510 @@
+"""A natively batched vector env: numpy over all envs at once, one rollout call per step.
+
+``gym.make_vec("soaring/Soaring-v0", num_envs=1024)`` (``vectorization_mode`` left out or
+``"vector_entry_point"``) builds :class:`SoaringVectorEnv`; ``"sync"`` / ``"async"`` build
+gymnasium's generic vector envs over :class:`~soaring_env.env.core.SoaringEnv`. All give the same
+transitions for the same seeds: every env ``i`` behaves like a single env reset with ``seed + i``
+(each has its own ``np.random.Generator``, used only by ``"random"`` scenarios).
+
+Autoreset: ``AutoresetMode.NEXT_STEP`` by default, as gymnasium's ``SyncVectorEnv`` (the step
+after an episode ends resets that env, ignores its action and returns reward 0,
+terminated = truncated = False and the reset info); ``autoreset_mode=AutoresetMode.SAME_STEP``
+resets in the same step and puts the last observation and info into ``info["final_obs"]`` and
+``info["final_info"]``. Truncation: after ``max_episode_steps`` steps (the registered 40), as
+``TimeLimit`` does for a single env.
+
+Envs that share one scenario (the default ``"paper"`` mode, or a pinned one) are rolled out in a
+single kernel call; in ``"random"`` mode every env has its own thermal field and the kernel is
+called once per distinct scenario (slower: the kernel takes one field per call).
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Sequence
+from typing import Any, ClassVar
+
+import numpy as np
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from soaring_env._validation import ConfigError
+from soaring_env.env._kernels import (
+    CRASH,
+    FLYING,
+    GOAL,
+    OUT_OF_BOUNDS,
+    classify_batch,
+    post_step,
+)
+from soaring_env.env.config import ENERGY_SCALE, SoaringEnvConfig, choose_scenario
+from soaring_env.env.core import PROGRESS_SCALE, SoaringBaseEnv, SoaringContinuousEnv, SoaringEnv
+from soaring_env.env.observation import N_PARAMS, observe_batch, scenario_params
+from soaring_env.model import OUTCOMES, SoaringModel
+from soaring_env.primitives import N_PRIMITIVES, Propagator
+from soaring_env.scenario import Scenario
+
+_OUTCOMES_OBJ = np.array(OUTCOMES, dtype=object)
+#: info keys of a step that a reset info does not have
+_STEP_ONLY = ("edge_cost", "fuel", "potential", "kinetic", "airspeed", "bank_angle", "reward_terms")
+
+
+class _SoaringVectorBase(VectorEnv):
+    """``num_envs`` copies of a soaring env stepped as numpy arrays.
+
+    Same observations, rewards, terminations, truncations and info values as ``num_envs`` single
+    envs (``gym.make_vec(..., vectorization_mode="sync")``) for the same seeds and actions; infos
+    are gymnasium's batched dicts (``info[key]`` arrays with ``info["_" + key]`` masks).
+
+    :param num_envs: number of envs B.
+    :param max_episode_steps: truncate after this many steps (None: never).
+    :param render_mode: must be None (render single envs instead).
+    :param config: a :class:`~soaring_env.env.config.SoaringEnvConfig` (or dict), shared by all envs.
+    :param autoreset_mode: ``NEXT_STEP`` (default) or ``SAME_STEP``.
+    :param overrides: single config fields, as for ``gym.make``.
+
+    Attributes: ``states`` (B, 4), ``times`` (B,) [s], ``airspeed_prev`` (B,) [m/s],
+    ``energy_spent`` (B,) [J/kg], ``scenarios`` and ``models`` (lists of B).
+    """
+
+    metadata: dict[str, Any] = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}  # noqa: RUF012
+    single_env_class: ClassVar[type[SoaringBaseEnv]] = SoaringEnv
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        max_episode_steps: int | None = 40,
+        render_mode: str | None = None,
+        config: SoaringEnvConfig | dict[str, Any] | None = None,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        **overrides: Any,
+    ) -> None:
+        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
+            raise ConfigError(f"num_envs={num_envs!r} must be an integer >= 1")
+        if render_mode is not None:
+            raise ConfigError(
+                f"render_mode={render_mode!r}: the native vector env does not render; allowed: None "
+                "(use vectorization_mode='sync' or a single env to render)"
+            )
+        if max_episode_steps is not None and (isinstance(max_episode_steps, bool) or max_episode_steps < 1):
+            raise ConfigError(f"max_episode_steps={max_episode_steps!r} must be an integer >= 1 or None")
+        try:
+            mode = AutoresetMode(autoreset_mode)
+        except ValueError:
+            raise ConfigError(
+                f"autoreset_mode={autoreset_mode!r} is not supported; allowed: NEXT_STEP, SAME_STEP"
+            ) from None
+        if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
+            raise ConfigError(f"autoreset_mode={mode!r} is not supported; allowed: NEXT_STEP, SAME_STEP")
+        self.autoreset_mode = mode
+        self.metadata = {**type(self).metadata, "autoreset_mode": mode}
+        #: a single env that holds the shared configuration, spaces and library
+        self.template = tmpl = self.single_env_class(config, **overrides)
+        self.config = tmpl.config
+        self.num_envs = int(num_envs)
+        self.max_episode_steps = max_episode_steps
+        self.render_mode = None
+        self.single_observation_space = tmpl.observation_space
+        self.single_action_space = tmpl.action_space
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.observation_names = tmpl.observation_names
+        self.continuous = tmpl.continuous
+        b = self.num_envs
+        self._n_obs = tmpl._n_obs
+        self._n_pts = tmpl.library.n_points
+        self.states = np.empty((b, 4))
+        self.times = np.zeros(b)
+        self.airspeed_prev = np.full(b, np.nan)
+        self.energy_spent = np.zeros(b)
+        self.steps = np.zeros(b, dtype=np.int64)
+        self._d_goal = np.zeros(b)
+        self._lift = np.zeros(b)
+        self._upd = np.zeros(b)
+        self._dist = np.zeros(b)
+        self._prev_done = np.zeros(b, dtype=np.bool_)
+        self._prm = np.zeros((b, N_PARAMS))
+        self._th = np.zeros((b, 1, 4))
+        self._nth = np.zeros(b, dtype=np.int64)
+        self._seeds: list[int | None] = [None] * b
+        self._rngs: list[np.random.Generator | None] = [None] * b
+        self.scenarios: list[Scenario] = [tmpl.scenario] * b
+        self.models: list[SoaringModel] = [tmpl.model] * b
+        #: model per scenario in use, by id(scenario); the model keeps the scenario alive
+        self._models: dict[int, SoaringModel] = {id(tmpl.scenario): tmpl.model}
+        self._groups: list[tuple[Propagator, np.ndarray]] | None = None
+        self._bank_ok = tmpl.model.bank_ok()
+        self._lo, hi = tmpl.library.control_bounds()
+        self._span = hi - self._lo
+        self._needs_reset = True
+        self._obs_last = np.zeros((b, self._n_obs), dtype=np.float32)
+
+    # --- scenario bookkeeping ------------------------------------------------------------------------
+    def _rng(self, i: int) -> np.random.Generator:
+        rng = self._rngs[i]
+        if rng is None:
+            rng, _ = seeding.np_random(self._seeds[i])
+            self._rngs[i] = rng
+        return rng
+
+    def _model(self, sc: Scenario) -> SoaringModel:
+        model = self._models.get(id(sc))
+        if model is None or model.scenario is not sc:
+            t = self.template
+            model = SoaringModel(
+                scenario=sc,
+                aircraft=t.config.aircraft,
+                library=t.library,
+                max_substep=t.config.max_substep,
+                max_bank_deg=t.config.max_bank_deg,
+            )
+            self._models[id(sc)] = model
+        return model
+
+    def _props(self, key: int) -> Propagator:
+        return self._models[key].propagator
+
+    def _reset_rows(self, rows: np.ndarray, options: dict[str, Any] | None, obs: np.ndarray) -> None:
+        """Start new episodes in envs ``rows`` and write their observations into ``obs``."""
+        t = self.template
+        fixed = t._fixed_scenario
+        row_list = rows.tolist()
+        if options is None and fixed is not None:
+            chosen = [fixed]
+            groups: list[tuple[Scenario, np.ndarray]] = [(fixed, rows)]
+            if any(self.scenarios[i] is not fixed for i in row_list):
+                self._groups = None
+                self._model(fixed)
+                for i in row_list:
+                    self.scenarios[i] = fixed
+                    self.models[i] = self._models[id(fixed)]
+        else:
+            chosen = [
+                choose_scenario(options, fixed, t.config.random_scenario, functools.partial(self._rng, i))
+                for i in row_list
+            ]
+            by_sc: dict[int, list[int]] = {}
+            for i, sc in zip(row_list, chosen, strict=True):
+                if self.scenarios[i] is not sc:
+                    self._groups = None
+                    self.scenarios[i] = sc
+                    self.models[i] = self._model(sc)
+                by_sc.setdefault(id(sc), []).append(i)
+            groups = [(self.scenarios[v[0]], np.array(v)) for v in by_sc.values()]
+        need = max(len(sc.field.thermals) for sc in chosen)
+        if need > self._th.shape[1]:
+            th = np.zeros((self.num_envs, need, 4))
+            th[:, : self._th.shape[1]] = self._th
+            self._th = th
+        for sc, idx in groups:
+            n = len(sc.field.thermals)
+            self._prm[idx] = scenario_params(sc)
+            self._th[idx, :n] = sc.field.packed
+            self._nth[idx] = n
+            self.states[idx] = sc.start_state
+        self.times[rows] = 0.0
+        self.airspeed_prev[rows] = np.nan
+        self.energy_spent[rows] = 0.0
+        self.steps[rows] = 0
+        self._lift[rows] = 0.0
+        observe_batch(
+            self.states,
+            self.times,
+            self.airspeed_prev,
+            self._lift,
+            self._prm,
+            self._th,
+            self._nth,
+            t._scales,
+            t._k_obs,
+            t._low,
+            t._high,
+            rows,
+            self._upd,
+            self._dist,
+            obs,
+        )
+        self._d_goal[rows] = self._dist[rows]
+        if len(self._models) > 4 * self.num_envs:  # forget models of scenarios no env uses
+            live = {id(sc) for sc in self.scenarios}
+            self._models = {k: v for k, v in self._models.items() if k in live}
+
+    def _reset_info(self, rows: np.ndarray, infos: dict[str, Any]) -> None:
+        """Write the reset info of envs ``rows`` into batched ``infos`` (masks like SyncVectorEnv)."""
+        b = self.num_envs
+        vals = {
+            "energy_spent": np.zeros(b),
+            "height": self.states[:, 3].copy(),
+            "updraft": self._upd.copy(),
+            "time": np.zeros(b),
+            "outcome": np.full(b, "flying", dtype=object),
+            "is_success": np.zeros(b, dtype=np.bool_),
+            "scenario": np.array([sc.name for sc in self.scenarios], dtype=object),
+        }
+        for key, v in vals.items():
+            if key in infos:
+                infos[key][rows] = v[rows]
+                infos["_" + key][rows] = True
+            else:
+                arr = np.zeros(b, dtype=v.dtype) if v.dtype != object else np.full(b, None, dtype=object)
+                arr[rows] = v[rows]
+                mask = np.zeros(b, dtype=np.bool_)
+                mask[rows] = True
+                infos[key], infos["_" + key] = arr, mask
+        for key in _STEP_ONLY:
+            if key in infos:
+                infos["_" + key][rows] = False
+                if key == "reward_terms":
+                    for sub, arr in infos[key].items():
+                        if not sub.startswith("_"):
+                            arr[rows] = 0.0
+                            infos[key]["_" + sub][rows] = False
+                else:
+                    infos[key][rows] = 0
+
+    # --- gymnasium API -------------------------------------------------------------------------------
+    def reset(
+        self, *, seed: int | Sequence[int | None] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Reset all envs (or those in ``options["reset_mask"]``); env i is seeded with ``seed + i``."""
+        b = self.num_envs
+        seeds: list[int | None]
+        if seed is None:
+            seeds = [None] * b
+        elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+            super().reset(seed=int(seed))
+            seeds = [int(seed) + i for i in range(b)]
+        elif isinstance(seed, Sequence) and len(seed) == b:
+            seeds = [None if s is None else int(s) for s in seed]
+        else:
+            raise ConfigError(f"seed={seed!r} is invalid; allowed: None, an int, or a list of {b} ints/None")
+        opts = dict(options) if options else {}
+        mask = opts.pop("reset_mask", None)
+        if mask is None:
+            rows = np.arange(b)
+        else:
+            mask = np.asarray(mask)
+            if mask.shape != (b,) or mask.dtype != np.bool_ or not mask.any():
+                raise ConfigError(f"options['reset_mask'] must be a bool array of shape ({b},) with a True entry")
+            rows = np.flatnonzero(mask)
+        for i in rows.tolist():
+            if seeds[i] is not None:
+                self._seeds[i] = seeds[i]
+                self._rngs[i] = None
+        obs = np.empty((b, self._n_obs), dtype=np.float32)
+        if mask is not None:
+            obs[:] = self._obs_last
+        self._reset_rows(rows, opts or None, obs)
+        self._prev_done[rows] = False
+        self._needs_reset = False
+        self._obs_last = obs
+        infos: dict[str, Any] = {}
+        self._reset_info(rows, infos)
+        return obs.copy(), infos
+
+    def _controls(self, actions: Any) -> tuple[np.ndarray, np.ndarray | None]:
+        b = self.num_envs
+        a = np.asarray(actions)
+        if self.continuous:
+            if a.shape != (b, 3) or a.dtype.kind not in "fiu":
+                raise ConfigError(
+                    f"actions have shape {a.shape} and dtype {a.dtype}; allowed: a real array of shape ({b}, 3) "
+                    "in [-1, 1]"
+                )
+            a64 = a.astype(np.float64)
+            if not (np.all(a64 >= -1.0) and np.all(a64 <= 1.0)):
+                raise ConfigError("actions contain values outside [-1, 1] or non-finite values; allowed: [-1, 1]")
+            u = self._lo + 0.5 * (a64 + 1.0) * self._span
+            return np.ascontiguousarray(u[:, [0, 2, 1, 1]]), None
+        if a.shape != (b,) or a.dtype.kind not in "iu":
+            raise ConfigError(
+                f"actions={a!r} have shape {a.shape} and dtype {a.dtype}; allowed: integers of shape ({b},) "
+                f"in 0..{N_PRIMITIVES - 1}"
+            )
+        if a.size and (a.min() < 0 or a.max() >= N_PRIMITIVES):
+            raise ConfigError(f"actions contain indices outside 0..{N_PRIMITIVES - 1}")
+        return self.template._prop.ctrl_table[a], a
+
+    def _rollout(
+        self, x0: np.ndarray, t0: np.ndarray, vp: np.ndarray, ctrl: np.ndarray, prim: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Roll out edge b from ``x0[b]`` for every b: one kernel call per distinct scenario."""
+        groups = self._groups
+        if groups is None:
+            by: dict[int, list[int]] = {}
+            for i, sc in enumerate(self.scenarios):
+                by.setdefault(id(sc), []).append(i)
+            groups = [(self._props(k), np.array(v)) for k, v in by.items()]
+            self._groups = groups
+        if len(groups) == 1:
+            return groups[0][0].run(x0, t0, vp, ctrl)
+        n = x0.shape[0]
+        out = np.empty((n, self._n_pts, 4))
+        terms = np.empty((n, 6))
+        for prop, idx in groups:
+            o, tm = prop.run(
+                np.ascontiguousarray(x0[idx]),
+                t0[idx],
+                vp[idx],
+                np.ascontiguousarray(ctrl[idx]),
+            )
+            out[idx] = o
+            terms[idx] = tm
+        return out, terms
+
+    def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """Step all envs; see the module docstring for the autoreset modes."""
+        if self._needs_reset:
+            raise RuntimeError("step() called before reset(); call reset() first")
+        ctrl, prim = self._controls(actions)
+        t = self.template
+        b = self.num_envs
+        autoreset = self._prev_done.copy() if self.autoreset_mode == AutoresetMode.NEXT_STEP else None
+        out, terms = self._rollout(self.states, self.times, self.airspeed_prev, ctrl, prim)
+        t_new = self.times + t._ts
+        obs = np.empty((b, self._n_obs), dtype=np.float32)
+        new_states = np.empty((b, 4))
+        codes = np.empty(b, dtype=np.int64)
+        ks = np.empty(b, dtype=np.int64)
+        post_step(
+            out,
+            self.states,
+            ctrl,
+            t._dt,
+            t_new,
+            self._prm,
+            self._th,
+            self._nth,
+            t._scales,
+            t._k_obs,
+            t._low,
+            t._high,
+            codes,
+            ks,
+            new_states,
+            self._upd,
+            self._lift,
+            self._dist,
+            obs,
+        )
+        cost = terms[:, 3].copy()
+        airspeed = ctrl[:, 0].copy()
+        d_new = self._dist.copy()
+        r_energy = -cost / ENERGY_SCALE
+        r_progress = t._w_progress * (self._d_goal - d_new) / PROGRESS_SCALE
+        r_goal = np.where(codes == GOAL, t._r_goal, 0.0)
+        r_crash = np.where(codes == CRASH, t._r_crash, 0.0)
+        r_oob = np.where(codes == OUT_OF_BOUNDS, t._r_oob, 0.0)
+        reward = r_energy + r_progress + r_goal + r_crash + r_oob
+        terminated = codes != FLYING
+        self.states = new_states
+        self.times = t_new
+        self.airspeed_prev = airspeed.copy()
+        self.energy_spent = self.energy_spent + cost
+        self._d_goal = d_new
+        self.steps += 1
+        if self.max_episode_steps is None:
+            truncated = np.zeros(b, dtype=np.bool_)
+        else:
+            truncated = self.steps >= self.max_episode_steps
+        ones = np.ones(b, dtype=np.bool_)
+        infos: dict[str, Any] = {
+            "energy_spent": self.energy_spent.copy(),
+            "edge_cost": cost,
+            "fuel": terms[:, 0].copy(),
+            "potential": terms[:, 1].copy(),
+            "kinetic": terms[:, 2].copy(),
+            "height": new_states[:, 3].copy(),
+            "airspeed": airspeed,
+            "bank_angle": terms[:, 4].copy(),
+            "updraft": self._upd.copy(),
+            "time": t_new.copy(),
+            "outcome": _OUTCOMES_OBJ[codes],
+            "is_success": codes == GOAL,
+            "reward_terms": {
+                "energy": r_energy,
+                "progress": r_progress,
+                "goal": r_goal,
+                "crash": r_crash,
+                "out_of_bounds": r_oob,
+            },
+        }
+        for key in list(infos):
+            infos["_" + key] = ones.copy()
+        for key in list(infos["reward_terms"]):
+            infos["reward_terms"]["_" + key] = ones.copy()
+        if autoreset is not None:
+            if autoreset.any():
+                rows = np.flatnonzero(autoreset)
+                self._reset_rows(rows, None, obs)
+                reward[rows] = 0.0
+                terminated[rows] = False
+                truncated[rows] = False
+                self._reset_info(rows, infos)
+            self._prev_done = terminated | truncated
+        else:
+            done = terminated | truncated
+            if done.any():
+                rows = np.flatnonzero(done)
+                final_obs = np.full(b, None, dtype=object)
+                for i in rows.tolist():
+                    final_obs[i] = obs[i].copy()
+                final_info = {k: v for k, v in infos.items() if not k.startswith("_")}
+                final_info["reward_terms"] = dict(infos["reward_terms"])
+                for key in [k for k in final_info if not k.startswith("_")]:
+                    final_info["_" + key] = done.copy()
+                self._reset_rows(rows, None, obs)
+                infos = {k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in infos.items()}
+                infos["reward_terms"] = {k: v.copy() for k, v in infos["reward_terms"].items()}
+                self._reset_info(rows, infos)
+                infos["final_obs"], infos["_final_obs"] = final_obs, done.copy()
+                infos["final_info"], infos["_final_info"] = final_info, done.copy()
+        self._obs_last = obs
+        return obs, reward, terminated, truncated, infos
+
+    def close_extras(self, **kwargs: Any) -> None:
+        self.template.close()
+
+
+class SoaringVectorEnv(_SoaringVectorBase):
+    """``num_envs`` copies of :class:`~soaring_env.env.core.SoaringEnv` (``Discrete(174)``), stepped
+    as numpy arrays; see :class:`_SoaringVectorBase` for the arguments."""
+
+    single_env_class: ClassVar[type[SoaringBaseEnv]] = SoaringEnv
+
+    # --- action masking ------------------------------------------------------------------------------
+    def action_masks(self) -> np.ndarray:
+        """(B, 174) bool: :meth:`SoaringEnv.action_masks` of every env (one batched rollout)."""
+        b, p = self.num_envs, N_PRIMITIVES
+        x0 = np.repeat(self.states, p, axis=0)
+        t0 = np.repeat(self.times, p)
+        vp = np.repeat(self.airspeed_prev, p)
+        prim = np.tile(np.arange(p), b)
+        ctrl = self.template._prop.ctrl_table[prim]
+        saved = self._groups
+        by: dict[int, list[int]] = {}
+        for i, sc in enumerate(self.scenarios):
+            by.setdefault(id(sc), []).extend(range(i * p, (i + 1) * p))
+        self._groups = [(self._props(k), np.array(v)) for k, v in by.items()]
+        try:
+            out, _ = self._rollout(x0, t0, vp, ctrl, prim)
+        finally:
+            self._groups = saved
+        codes = np.empty(b * p, dtype=np.int64)
+        ks = np.empty(b * p, dtype=np.int64)
+        classify_batch(out, np.repeat(self._prm, p, axis=0), codes, ks)
+        code2 = codes.reshape(b, p)
+        k2 = ks.reshape(b, p)
+        valid = (code2 != CRASH) & (code2 != OUT_OF_BOUNDS) & self._bank_ok
+        for i in np.flatnonzero(~valid.any(axis=1)).tolist():
+            kk = np.where(self._bank_ok, k2[i], -1)
+            valid[i] = kk == kk.max()
+        return valid
+
+
+class SoaringContinuousVectorEnv(_SoaringVectorBase):
+    """``num_envs`` copies of :class:`~soaring_env.env.core.SoaringContinuousEnv` (``Box(-1, 1, (3,))``);
+    see :class:`_SoaringVectorBase` for the arguments."""
+
+    single_env_class: ClassVar[type[SoaringBaseEnv]] = SoaringContinuousEnv

@@ -1,0 +1,236 @@
+"""Vector envs: gymnasium sync / async, the native batched env, the SB3 adapter, subprocesses."""
+
+from __future__ import annotations
+
+import multiprocessing
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.vector import AutoresetMode
+
+import soaring_env  # noqa: F401  (registers the ids)
+from soaring_env import ConfigError
+from soaring_env.env import CONTINUOUS_ENV_ID, ENV_ID
+from soaring_env.env.vector import SoaringContinuousVectorEnv, SoaringVectorEnv
+from soaring_env.primitives import N_PRIMITIVES
+
+IDS = (ENV_ID, CONTINUOUS_ENV_ID)
+INFO_KEYS = ("energy_spent", "edge_cost", "height", "updraft", "time", "outcome", "is_success", "scenario")
+
+
+def _actions(space: gym.Space, rng: np.random.Generator, n: int) -> np.ndarray:
+    if isinstance(space, gym.spaces.Discrete):
+        return rng.integers(0, N_PRIMITIVES, n)
+    return rng.uniform(-1, 1, (n, 3)).astype(np.float32)
+
+
+def _assert_same_infos(a: dict, b: dict, keys=INFO_KEYS) -> None:
+    for key in keys:
+        assert (key in a) == (key in b), key
+        if key in a:
+            mask = a["_" + key]
+            assert np.array_equal(mask, b["_" + key]), key
+            assert np.array_equal(a[key][mask], b[key][mask]), (key, a[key], b[key])
+    if "reward_terms" in a:
+        for term, arr in a["reward_terms"].items():
+            assert np.array_equal(arr, b["reward_terms"][term]), term
+
+
+@pytest.mark.parametrize("env_id", IDS)
+@pytest.mark.parametrize("scenario", ["paper", "random"])
+def test_native_equals_sync_next_step(env_id: str, scenario: str) -> None:
+    n = 5
+    sync = gym.make_vec(env_id, num_envs=n, vectorization_mode="sync", scenario=scenario)
+    native = gym.make_vec(env_id, num_envs=n, scenario=scenario)
+    assert isinstance(native, (SoaringVectorEnv, SoaringContinuousVectorEnv))
+    assert native.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP
+    assert native.single_observation_space == sync.single_observation_space
+    assert native.action_space == sync.action_space
+    o1, i1 = sync.reset(seed=11)
+    o2, i2 = native.reset(seed=11)
+    assert np.array_equal(o1, o2)
+    _assert_same_infos(i1, i2)
+    rng = np.random.default_rng(0)
+    ended = 0
+    for _ in range(70):
+        a = _actions(sync.single_action_space, rng, n)
+        r1, r2 = sync.step(a), native.step(a)
+        for x, y in zip(r1[:4], r2[:4], strict=True):
+            assert np.array_equal(x, y)
+        _assert_same_infos(r1[4], r2[4])
+        ended += int((r1[2] | r1[3]).sum())
+    assert ended > 0  # autoresets happened
+    assert native.observation_space.contains(r2[0])
+    sync.close()
+    native.close()
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_native_equals_sync_same_step(env_id: str) -> None:
+    n = 4
+    kw = {"num_envs": n, "scenario": "random"}
+    sync = gym.make_vec(env_id, vectorization_mode="sync", vector_kwargs={"autoreset_mode": "SameStep"}, **kw)
+    native = gym.make_vec(env_id, autoreset_mode=AutoresetMode.SAME_STEP, **kw)
+    assert native.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
+    assert np.array_equal(sync.reset(seed=2)[0], native.reset(seed=2)[0])
+    rng = np.random.default_rng(1)
+    finals = 0
+    for _ in range(50):
+        a = _actions(sync.single_action_space, rng, n)
+        r1, r2 = sync.step(a), native.step(a)
+        for x, y in zip(r1[:4], r2[:4], strict=True):
+            assert np.array_equal(x, y)
+        _assert_same_infos(r1[4], r2[4])
+        if "final_obs" in r1[4]:
+            done = r1[4]["_final_obs"]
+            assert np.array_equal(done, r2[4]["_final_obs"])
+            for i in np.flatnonzero(done):
+                assert np.array_equal(r1[4]["final_obs"][i], r2[4]["final_obs"][i])
+                assert r1[4]["final_info"]["energy_spent"][i] == r2[4]["final_info"]["energy_spent"][i]
+                assert r1[4]["final_info"]["outcome"][i] == r2[4]["final_info"]["outcome"][i]
+            finals += int(done.sum())
+    assert finals > 0
+
+
+def test_native_reset_mask_seed_list_and_options() -> None:
+    env = SoaringVectorEnv(num_envs=3, scenario="random")
+    obs, _ = env.reset(seed=[5, None, 7])
+    single = gym.make(ENV_ID, scenario="random")
+    assert np.array_equal(obs[0], single.reset(seed=5)[0])
+    assert np.array_equal(obs[2], single.reset(seed=7)[0])
+    before = obs.copy()
+    mask = np.array([False, True, False])
+    obs2, info = env.reset(options={"reset_mask": mask, "scenario": "paper"})
+    assert np.array_equal(obs2[[0, 2]], before[[0, 2]])
+    assert env.scenarios[1].name == "paper" and env.scenarios[0].name == "random"
+    assert np.array_equal(info["_scenario"], mask)
+    with pytest.raises(ConfigError, match="reset_mask"):
+        env.reset(options={"reset_mask": np.zeros(3, dtype=bool)})
+
+
+def test_native_action_masks_equal_single_env_masks() -> None:
+    n = 4
+    env = SoaringVectorEnv(num_envs=n, scenario="random")
+    singles = [gym.make(ENV_ID, scenario="random") for _ in range(n)]
+    env.reset(seed=3)
+    for i, s in enumerate(singles):
+        s.reset(seed=3 + i)
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        masks = env.action_masks()
+        assert masks.shape == (n, N_PRIMITIVES) and masks.dtype == np.bool_
+        for i, s in enumerate(singles):
+            assert np.array_equal(masks[i], s.unwrapped.action_masks())
+        a = np.array([rng.choice(np.flatnonzero(m)) for m in masks])
+        env.step(a)
+        for i, s in enumerate(singles):
+            s.step(int(a[i]))
+
+
+@pytest.mark.parametrize(
+    ("actions", "match"),
+    [
+        (np.array([0, 1, 174]), "0..173"),
+        (np.array([0.0, 1.0, 2.0]), "integers"),
+        (np.array([0, 1]), "shape"),
+    ],
+)
+def test_native_bad_actions_are_explained(actions: np.ndarray, match: str) -> None:
+    env = SoaringVectorEnv(num_envs=3)
+    env.reset(seed=0)
+    with pytest.raises(ConfigError, match=match):
+        env.step(actions)
+    cont = SoaringContinuousVectorEnv(num_envs=2)
+    cont.reset(seed=0)
+    with pytest.raises(ConfigError, match=r"\[-1, 1\]"):
+        cont.step(np.array([[0.0, 0.0, 2.0], [0.0, 0.0, 0.0]]))
+    with pytest.raises(ConfigError, match=r"\[-1, 1\]"):
+        cont.step(np.array([[np.nan, 0.0, 0.0], [0.0, 0.0, 0.0]]))
+    with pytest.raises(ConfigError, match="render"):
+        SoaringVectorEnv(num_envs=2, render_mode="rgb_array")
+
+
+@pytest.mark.parametrize("continuous", [False, True])
+@pytest.mark.parametrize("scenario", ["paper", "random"])
+def test_sb3_adapter_equals_dummy_vec_env(continuous: bool, scenario: str) -> None:
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from soaring_env.env.sb3 import SoaringSB3VecEnv
+
+    env_id = CONTINUOUS_ENV_ID if continuous else ENV_ID
+    n = 4
+    dummy = DummyVecEnv([lambda: gym.make(env_id, scenario=scenario)] * n)
+    ours = SoaringSB3VecEnv(n, continuous=continuous, scenario=scenario)
+    dummy.seed(5)
+    ours.seed(5)
+    assert np.array_equal(dummy.reset(), ours.reset())
+    rng = np.random.default_rng(1)
+    dones = 0
+    for _ in range(60):
+        a = _actions(dummy.action_space, rng, n)
+        r1, r2 = dummy.step(a), ours.step(a)
+        for x, y in zip(r1[:3], r2[:3], strict=True):
+            assert x.dtype == y.dtype and np.array_equal(x, y)
+        for i1, i2 in zip(r1[3], r2[3], strict=True):
+            for key in ("terminal_observation", "TimeLimit.truncated", "energy_spent", "is_success", "outcome"):
+                assert (key in i1) == (key in i2), key
+                if key in i1:
+                    assert np.array_equal(i1[key], i2[key]), key
+        dones += int(r1[2].sum())
+    assert dones > 0
+    assert ours.has_attr("action_masks") != continuous
+    if not continuous:
+        masks = ours.env_method("action_masks")
+        assert len(masks) == n and masks[0].shape == (N_PRIMITIVES,)
+
+
+def test_maskable_ppo_trains_on_the_sb3_adapter() -> None:
+    from sb3_contrib import MaskablePPO
+
+    from soaring_env.env.sb3 import SoaringSB3VecEnv
+
+    venv = SoaringSB3VecEnv(4)
+    model = MaskablePPO("MlpPolicy", venv, n_steps=16, batch_size=32, n_epochs=1, seed=0, device="cpu")
+    model.learn(64)
+
+
+def test_async_vector_env_with_spawn() -> None:
+    env = gym.make_vec(
+        "soaring_env:soaring/Soaring-v0",
+        num_envs=2,
+        vectorization_mode="async",
+        vector_kwargs={"context": "spawn"},
+    )
+    try:
+        obs, _ = env.reset(seed=0)
+        assert obs.shape == (2, 26)
+        for _ in range(3):
+            obs, reward, *_ = env.step(np.array([7, 57]))
+        assert np.all(np.isfinite(reward))
+        masks = env.call("action_masks")
+        assert len(masks) == 2 and masks[0].shape == (N_PRIMITIVES,)
+    finally:
+        env.close()
+
+
+def test_sb3_subproc_vec_env_with_spawn() -> None:
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+
+    assert "spawn" in multiprocessing.get_all_start_methods()
+    venv = make_vec_env(
+        "soaring_env:soaring/SoaringContinuous-v0",
+        n_envs=2,
+        seed=0,
+        vec_env_cls=SubprocVecEnv,
+        vec_env_kwargs={"start_method": "spawn"},
+    )
+    try:
+        venv.reset()
+        for _ in range(3):
+            obs, reward, _done, info = venv.step(np.zeros((2, 3), dtype=np.float32))
+        assert obs.shape == (2, 26) and np.all(np.isfinite(reward))
+        assert "energy_spent" in info[0]
+    finally:
+        venv.close()
