@@ -1,0 +1,72 @@
+"""Reproduce the paper's experiment: both SST planners (motion primitives vs continuous controls),
+R runs of T seconds each on the paper scenario, in parallel; prints the paper's table beside ours
+and saves figures 2-5.
+
+    python scripts/reproduce_paper.py --quick          # 3 runs x 5 s per planner (about a minute)
+    python scripts/reproduce_paper.py                  # the paper's 30 runs x 20 s per planner
+
+Results go to ``results/paper`` (``results/paper-quick`` with ``--quick``): one JSON file per run,
+written as soon as the run finishes, so an interrupted experiment resumes where it stopped.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+from baselines.experiment import ExperimentConfig, make_figures, run_experiment, write_report
+from baselines.sst.core import SSTError
+from baselines.sst.soaring import SoaringSSTConfig
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--runs", type=int, default=None, help="runs per planner (paper: 30)")
+    ap.add_argument("--time", type=float, default=None, help="planning time per run [s] (paper: 20)")
+    ap.add_argument("--quick", action="store_true", help="shortened mode: 3 runs x 5 s per planner")
+    ap.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="parallel worker processes")
+    ap.add_argument("--seed", type=int, default=0, help="seed of run 0 (run r uses seed + r)")
+    ap.add_argument("--out", type=Path, default=None, help="output directory")
+    ap.add_argument("--fresh", action="store_true", help="ignore existing results and run everything again")
+    ap.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    ap.add_argument("--no-progress", action="store_true", help="no progress bar")
+    ap.add_argument("--selection-radius", type=float, default=SoaringSSTConfig.selection_radius, help="delta_BN [m]")
+    ap.add_argument("--pruning-radius", type=float, default=SoaringSSTConfig.pruning_radius, help="delta_s [m]")
+    ap.add_argument("--batch-size", type=int, default=SoaringSSTConfig.batch_size, help="expansions per round")
+    args = ap.parse_args(argv)
+
+    runs = args.runs if args.runs is not None else (3 if args.quick else 30)
+    t_lim = args.time if args.time is not None else (5.0 if args.quick else 20.0)
+    out = args.out if args.out is not None else Path("results/paper-quick" if args.quick else "results/paper")
+    try:
+        planner = SoaringSSTConfig(
+            selection_radius=args.selection_radius, pruning_radius=args.pruning_radius, batch_size=args.batch_size
+        )
+        cfg = ExperimentConfig(
+            runs=runs, time_limit=t_lim, workers=args.workers, seed=args.seed, out_dir=out, planner=planner
+        )
+    except SSTError as exc:
+        ap.error(str(exc))
+    t0 = time.perf_counter()
+    print(
+        f"SST on the '{cfg.scenario.name}' scenario: {runs} runs x {t_lim:g} s per planner, {cfg.workers} workers, "
+        f"delta_BN={planner.selection_radius:g} m, delta_s={planner.pruning_radius:g} m, batch={planner.batch_size}",
+        flush=True,
+    )
+    records = run_experiment(cfg, progress=not args.no_progress, fresh=args.fresh)
+    table, path = write_report(cfg, records)
+    print()
+    print(table)
+    print(f"\ntable: {path}")
+    if not args.no_figures:
+        for p in make_figures(records, cfg.scenario, cfg.out_dir, cfg.time_limit):
+            print(f"figure: {p}")
+    print(f"done in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
