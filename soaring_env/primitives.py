@@ -353,6 +353,7 @@ def _rollout_kernel(
     tmodel = ac[_AC_MODEL]
     two_pi = 2.0 * math.pi
     infl = np.empty(nth)
+    cand = np.empty(nth, dtype=np.int64)
     w_bound = 0.0  # |updraft| <= 1.2 w* (Allen's peak/w* stays below 1.1)
     for j in range(nth):
         w_bound = max(w_bound, 1.2 * th[j, 2])
@@ -372,13 +373,22 @@ def _rollout_kernel(
         s = math.sin(x0[b, 2])
         # Relative to a (possibly drifting) thermal the aircraft moves at most u + 2|wind|.
         reach = (u + 2.0 * wind) * dt
-        any_near = False
+        # Thermals the whole edge can come near: an arc stays within its diameter 2u/|om| of its
+        # start, a spline within the sum over its two arcs, any path within u * dur.
+        span = u * dur
+        w1 = abs(ctrl[b, 2])
+        w2 = abs(ctrl[b, 3])
+        if w1 > 0.0 and w2 > 0.0:
+            span = min(span, 2.0 * u / w1 + 2.0 * u / w2)
+        span += 2.0 * wind * dur
+        n_cand = 0
         for j in range(nth):
             dx = n - th[j, 0] - dvx * t0[b]
             dy = e - th[j, 1] - dvy * t0[b]
-            lim = infl[j] + reach * n_pts
+            lim = infl[j] + span + reach
             if dx * dx + dy * dy < lim * lim:
-                any_near = True
+                cand[n_cand] = j
+                n_cand += 1
         max_bank = 0.0
         fuel = 0.0
         min_h = h
@@ -401,21 +411,21 @@ def _rollout_kernel(
             t_start = t0[b] + k * dt
             n1, e1, c1, s1 = _advance(n, e, c, s, u, om, dt, cd, sd, wn, we)
             near = False
-            if any_near:
-                for j in range(nth):
-                    dx = n - th[j, 0] - dvx * t_start
-                    dy = e - th[j, 1] - dvy * t_start
-                    lim = infl[j] + reach
-                    d2 = dx * dx + dy * dy
+            for jc in range(n_cand):
+                j = cand[jc]
+                dx = n - th[j, 0] - dvx * t_start
+                dy = e - th[j, 1] - dvy * t_start
+                lim = infl[j] + reach
+                d2 = dx * dx + dy * dy
+                if d2 < lim * lim:
+                    if model == _GAUSSIAN:
+                        near = True
+                        break
+                    # Allen: refine with 2 r2 at the highest height this interval can reach.
+                    lim = allen_reach(h + (abs(climb) + w_bound) * dt, zi) + reach
                     if d2 < lim * lim:
-                        if model == _GAUSSIAN:
-                            near = True
-                            break
-                        # Allen: refine with 2 r2 at the highest height this interval can reach.
-                        lim = allen_reach(h + (abs(climb) + w_bound) * dt, zi) + reach
-                        if d2 < lim * lim:
-                            near = True
-                            break
+                        near = True
+                        break
             if near:
                 # Simpson's rule on each substep; the rates at the mid and end points use predicted
                 # heights (the updraft depends on h only weakly), and the end rate is reused as the
