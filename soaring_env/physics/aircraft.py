@@ -112,7 +112,7 @@ class Aircraft:
         out = np.empty(v.shape)
         ac = self.packed()
         for i in np.ndindex(v.shape):
-            out[i] = _thrust(v[i], g_[i], math.cos(p[i]), h[i], ac)
+            out[i] = _thrust(float(v[i]), float(g_[i]), math.cos(p[i]), float(h[i]), ac)
         return out
 
     def fuel_power(self, airspeed, gamma, bank, height) -> np.ndarray:
