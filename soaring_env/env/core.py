@@ -195,9 +195,12 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         self._ts = float(self.library.duration)
         self._dt = self.library.duration / self.library.n_points
         self._w_progress = float(cfg.progress_weight)
-        self._r_goal = float(cfg.goal_bonus)
-        self._r_crash = -float(cfg.crash_penalty)
-        self._r_oob = -float(cfg.out_of_bounds_penalty)
+        # Terminal reward terms indexed by the edge outcome code (FLYING, GOAL, CRASH, OUT_OF_BOUNDS).
+        self._terminal = {
+            "goal": np.array([0.0, float(cfg.goal_bonus), 0.0, 0.0]),
+            "crash": np.array([0.0, 0.0, -float(cfg.crash_penalty), 0.0]),
+            "out_of_bounds": np.array([0.0, 0.0, 0.0, -float(cfg.out_of_bounds_penalty)]),
+        }
         # scratch buffers of the hot path (copied into Python floats before step returns)
         self._t0 = np.zeros(1)
         self._vp = np.full(1, np.nan)
@@ -228,6 +231,20 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
 
     def _make_action_space(self) -> spaces.Space:
         raise NotImplementedError
+
+    def reward_terms(self, cost, d_prev, d_new, code) -> dict[str, Any]:
+        """The reward terms of an edge -- floats for one edge, arrays for a batch (the vector env).
+
+        ``energy = -cost / 1000`` (cost in J/kg), ``progress = w (d_prev - d_new) / 1000`` (goal
+        distances in m), and the terminal terms of the outcome ``code``; the reward is their sum.
+        """
+        terms = {
+            "energy": -cost / ENERGY_SCALE,
+            "progress": self._w_progress * (d_prev - d_new) / PROGRESS_SCALE,
+        }
+        for key, by_code in self._terminal.items():
+            terms[key] = by_code[code]
+        return terms
 
     # --- scenario handling -----------------------------------------------------------------------
     def _install(self, sc: Scenario) -> None:
@@ -356,12 +373,8 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         self.updraft = updraft
         outcome = OUTCOMES[code]
         self.outcome = outcome
-        r_energy = -cost / ENERGY_SCALE
-        r_progress = self._w_progress * (self._d_goal - d_new) / PROGRESS_SCALE
-        r_goal = self._r_goal if code == GOAL else 0.0
-        r_crash = self._r_crash if code == CRASH else 0.0
-        r_oob = self._r_oob if code == OUT_OF_BOUNDS else 0.0
-        reward = r_energy + r_progress + r_goal + r_crash + r_oob
+        reward_terms = {key: float(v) for key, v in self.reward_terms(cost, self._d_goal, d_new, code).items()}
+        reward = sum(reward_terms.values())
         self._d_goal = d_new
         terminated = code != FLYING
         self._needs_reset = terminated
@@ -385,13 +398,7 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
             "time": t_new,
             "outcome": outcome,
             "is_success": code == GOAL,
-            "reward_terms": {
-                "energy": r_energy,
-                "progress": r_progress,
-                "goal": r_goal,
-                "crash": r_crash,
-                "out_of_bounds": r_oob,
-            },
+            "reward_terms": reward_terms,
         }
         if self.render_mode == "human":
             self.render()

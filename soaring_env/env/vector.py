@@ -38,8 +38,8 @@ from soaring_env.env._kernels import (
     classify_batch,
     post_step,
 )
-from soaring_env.env.config import ENERGY_SCALE, SoaringEnvConfig, choose_scenario
-from soaring_env.env.core import PROGRESS_SCALE, SoaringBaseEnv, SoaringContinuousEnv, SoaringEnv
+from soaring_env.env.config import SoaringEnvConfig, choose_scenario
+from soaring_env.env.core import SoaringBaseEnv, SoaringContinuousEnv, SoaringEnv
 from soaring_env.env.observation import N_PARAMS, observe_batch, scenario_params
 from soaring_env.model import OUTCOMES, SoaringModel
 from soaring_env.primitives import N_PRIMITIVES, Propagator
@@ -391,12 +391,8 @@ class _SoaringVectorBase(VectorEnv):
         cost = terms[:, 3].copy()
         airspeed = ctrl[:, 0].copy()
         d_new = self._dist.copy()
-        r_energy = -cost / ENERGY_SCALE
-        r_progress = t._w_progress * (self._d_goal - d_new) / PROGRESS_SCALE
-        r_goal = np.where(codes == GOAL, t._r_goal, 0.0)
-        r_crash = np.where(codes == CRASH, t._r_crash, 0.0)
-        r_oob = np.where(codes == OUT_OF_BOUNDS, t._r_oob, 0.0)
-        reward = r_energy + r_progress + r_goal + r_crash + r_oob
+        reward_terms = t.reward_terms(cost, self._d_goal, d_new, codes)
+        reward = sum(reward_terms.values())
         terminated = codes != FLYING
         self.states = new_states
         self.times = t_new
@@ -422,13 +418,7 @@ class _SoaringVectorBase(VectorEnv):
             "time": t_new.copy(),
             "outcome": _OUTCOMES_OBJ[codes],
             "is_success": codes == GOAL,
-            "reward_terms": {
-                "energy": r_energy,
-                "progress": r_progress,
-                "goal": r_goal,
-                "crash": r_crash,
-                "out_of_bounds": r_oob,
-            },
+            "reward_terms": reward_terms,
         }
         for key in list(infos):
             infos["_" + key] = ones.copy()
