@@ -33,6 +33,7 @@ import numpy as np
 
 from baselines.sst.core import EDGE_GOAL, EDGE_INVALID, EDGE_VALID, Edges, SSTError, StateSpace
 from baselines.sst.samplers import BoxSampler, IndexSampler
+from soaring_env._validation import check_int, check_positive
 from soaring_env.model import FLYING, GOAL, SoaringModel
 from soaring_env.primitives import COL_AIRSPEED
 
@@ -71,19 +72,10 @@ class SoaringSSTConfig:
 
     def __post_init__(self) -> None:
         for name in ("selection_radius", "pruning_radius", "heading_scale", "height_scale"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) or not math.isfinite(v):
-                raise SSTError(f"{name}={v!r} must be a finite number > 0")
-            if v <= 0:
-                raise SSTError(f"{name}={v!r} must be > 0")
-        if isinstance(self.batch_size, bool) or not isinstance(self.batch_size, (int, np.integer)):
-            raise SSTError(f"batch_size={self.batch_size!r} must be an integer >= 1")
-        if self.batch_size < 1:
-            raise SSTError(f"batch_size={self.batch_size!r} must be an integer >= 1")
-        if self.max_edges is not None and (
-            isinstance(self.max_edges, bool) or not isinstance(self.max_edges, (int, np.integer)) or self.max_edges < 1
-        ):
-            raise SSTError(f"max_edges={self.max_edges!r} must be None or an integer >= 1")
+            check_positive(name, getattr(self, name))
+        check_int("batch_size", self.batch_size, 1)
+        if self.max_edges is not None:
+            check_int("max_edges", self.max_edges, 1)
 
 
 class SoaringProblem:
