@@ -1,0 +1,335 @@
+"""The common agent interface of the baselines, and the agents that need no planner.
+
+Every agent that :mod:`baselines.evaluation` runs follows :class:`Agent`: ``reset(env, seed)`` once
+per episode, right after ``env.reset`` (a planner plans there, from ``env.unwrapped``), then
+``predict(obs)`` once per ``env.step`` -- the signature of stable-baselines3's ``predict``, so an SB3
+model, :func:`stable_baselines3.common.evaluation.evaluate_policy` and these agents are
+interchangeable. Execution and scoring always go through ``env.step``.
+
+* :class:`RandomAgent` -- uniform random actions from its own seeded generator, optionally only
+  among the actions that the env's ``action_masks()`` allows.
+* :class:`HeuristicAgent` -- a hand-written rule, no search: circle while the updraft measured at
+  the aircraft is strong and height is still useful, otherwise turn towards the goal and pick the
+  path angle that brings the aircraft down (or up) to the goal region on arrival.
+* :class:`SSTPlannerAgent` -- :class:`baselines.sst.SSTAgent` (plans on reset with the model the
+  env exposes; knows the thermal field) behind this interface, seeded per episode.
+* :class:`PPOAgent` -- a saved stable-baselines3 / sb3-contrib model with the JSON configuration it
+  was trained with (see :mod:`baselines.ppo`); acts deterministically by default. torch is imported
+  only when one is loaded.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any, Protocol, cast, runtime_checkable
+
+import gymnasium as gym
+import numpy as np
+
+from soaring_env.primitives import COL_AIRSPEED, COL_CHI_DOT_1, COL_CHI_DOT_2, COL_FAMILY, COL_GAMMA, SPIRAL
+
+__all__ = ["Agent", "HeuristicAgent", "PPOAgent", "RandomAgent", "SSTPlannerAgent", "action_mask_of"]
+
+
+@runtime_checkable
+class Agent(Protocol):
+    """What :mod:`baselines.evaluation` needs from an agent.
+
+    ``name`` labels results. ``reset`` is called once per episode after ``env.reset`` and may plan
+    (its time counts as compute time). ``predict`` returns ``(action, state)`` like SB3.
+    """
+
+    name: str
+
+    def reset(self, env: gym.Env, seed: int | None = None) -> None:
+        """Prepare for a new episode of ``env`` (already reset); ``seed`` seeds the agent's randomness."""
+        ...
+
+    def predict(
+        self,
+        observation: Any,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> tuple[Any, Any]:
+        """The action for ``observation`` and the recurrent state (``None`` here)."""
+        ...
+
+
+def action_mask_of(env: gym.Env) -> np.ndarray | None:
+    """The env's boolean action mask (``action_masks()`` of the base env), or ``None`` if it has none."""
+    fn = getattr(env.unwrapped, "action_masks", None)
+    if fn is None:
+        return None
+    mask = np.asarray(fn(), dtype=bool)
+    return mask if mask.any() else None
+
+
+class RandomAgent:
+    """Uniformly random actions from a seeded generator of its own.
+
+    :param use_masks: on a ``Discrete`` env with ``action_masks()``, draw only among allowed actions
+        (a fairer baseline: it never picks a primitive the env forbids).
+    :param name: label in results.
+    """
+
+    def __init__(self, *, use_masks: bool = True, name: str = "random") -> None:
+        self.name = name
+        self.use_masks = use_masks
+        self._env: gym.Env | None = None
+        self._rng = np.random.default_rng()
+
+    def reset(self, env: gym.Env, seed: int | None = None) -> None:
+        """Remember ``env`` (for its action space and masks) and reseed the generator with ``seed``."""
+        self._env = env
+        self._rng = np.random.default_rng(seed)
+
+    def predict(
+        self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True
+    ) -> tuple[Any, None]:
+        """A random action; ``deterministic`` is ignored (the generator is seeded in :meth:`reset`)."""
+        if self._env is None:
+            raise RuntimeError("RandomAgent.predict called before reset(env, seed)")
+        space = self._env.action_space
+        if isinstance(space, gym.spaces.Discrete):
+            mask = action_mask_of(self._env) if self.use_masks else None
+            if mask is not None:
+                return np.int64(self._rng.choice(np.flatnonzero(mask))), None
+            return np.int64(space.start + self._rng.integers(space.n)), None
+        if isinstance(space, gym.spaces.Box):
+            a = self._rng.uniform(space.low, space.high)
+            return a.astype(space.dtype), None
+        raise TypeError(f"RandomAgent supports Discrete and Box action spaces, not {space!r}")
+
+
+def _wrap(angle: float) -> float:
+    """Angle wrapped to [-pi, pi)."""
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
+class HeuristicAgent:
+    """Head for the goal, circle in lift: a hand-written rule with no search and no thermal map.
+
+    It reads only what an aircraft measures (position, course, height, and the updraft at its own
+    position and at two probe points ``probe`` metres to its left and right, like a variometer) and
+    where the goal is. Each decision:
+
+    1. **Circle in lift** -- if the updraft here is at least ``lift_threshold`` and the aircraft is
+       below ``ceiling`` of the boundary-layer depth and not already high enough to glide into the
+       goal region, fly a full circle at the slow airspeed, level, turning towards the side where
+       the probes measure more lift.
+    2. **Head for the goal** -- otherwise steer by pure pursuit (the turn of the circular arc that is
+       tangent to the course and passes through the goal; a hard turn if the goal is behind) and
+       choose the path angle that spreads the height difference to the goal's upper half over the
+       remaining distance (gliding costs no fuel, so it prefers to arrive high); fly fast when
+       cruising, slow when climbing or near the goal (tighter turns).
+
+    On the discrete env it picks the primitive nearest to that intent (among those the action mask
+    allows); on the continuous env it commands the control directly.
+
+    :param lift_threshold: updraft [m/s] that counts as lift worth circling in.
+    :param ceiling: fraction of the thermal field's ``zi`` above which it stops circling.
+    :param probe: lateral distance [m] of the left/right updraft probes.
+    :param name: label in results.
+    """
+
+    def __init__(
+        self, *, lift_threshold: float = 0.8, ceiling: float = 0.75, probe: float = 60.0, name: str = "heuristic"
+    ) -> None:
+        self.name = name
+        self.lift_threshold = lift_threshold
+        self.ceiling = ceiling
+        self.probe = probe
+        self._env: gym.Env | None = None
+
+    def reset(self, env: gym.Env, seed: int | None = None) -> None:
+        """Remember ``env``; the rule is deterministic, so ``seed`` is unused."""
+        self._env = env
+
+    # --- the rule ----------------------------------------------------------------------------
+    def intent(self) -> tuple[float, float, float]:
+        """The wanted control for the next step: (airspeed [m/s], total turn [rad], path angle [rad])."""
+        env = self._require_env()
+        base: Any = env.unwrapped
+        sc = base.scenario
+        model = base.model
+        lib = model.library
+        pn, pe, chi, h = (float(v) for v in np.asarray(base.state, dtype=np.float64)[:4])
+        t = float(getattr(base, "time", 0.0))
+        goal = sc.goal
+        field = sc.field
+        ts = self._step_duration()
+        v_slow, v_fast = float(lib.table[:, COL_AIRSPEED].min()), float(lib.table[:, COL_AIRSPEED].max())
+        dn, de = goal.north - pn, goal.east - pe
+        dist = math.hypot(dn, de)
+        bearing = math.atan2(de, dn)
+        err = _wrap(bearing - chi)
+        # Height to aim for at arrival: the upper half of the goal sphere (gliding down costs no fuel).
+        h_aim = goal.height + 0.5 * goal.radius
+        w_here = float(field.updraft(pn, pe, h, t))
+        too_high_to_need = h - h_aim > 0.27 * max(dist - goal.radius, 0.0)  # can glide in at -15 deg
+        if (
+            w_here >= self.lift_threshold
+            and h < self.ceiling * field.zi
+            and h < sc.bounds.height_max - 150.0
+            and not too_high_to_need
+            and dist > goal.radius
+        ):
+            # Right of the course chi (clockwise from north) is chi + 90 deg: (-sin chi, cos chi).
+            right = float(field.updraft(pn - self.probe * math.sin(chi), pe + self.probe * math.cos(chi), h, t))
+            left = float(field.updraft(pn + self.probe * math.sin(chi), pe - self.probe * math.cos(chi), h, t))
+            sign = 1.0 if right >= left else -1.0  # chi_dot > 0 turns right (clockwise seen from above)
+            return v_slow, sign * 2.0 * math.pi, 0.0
+        # Head for the goal: climb or descend along the straight line to the aim height.
+        run = max(dist - 0.5 * goal.radius, 1.0)
+        gamma = math.atan2(h_aim - h, run)
+        # Slow near the goal (tighter turns) and when climbing (cheaper per metre); fast otherwise.
+        v = v_fast if gamma < math.radians(5.0) and dist > 4.0 * v_fast * ts else v_slow
+        # Pure pursuit: the arc tangent to the course through the goal has curvature 2 sin(err) / dist.
+        turn = 2.0 * v * ts * math.sin(err) / max(dist, 1.0)
+        if abs(err) > 0.5 * math.pi:  # goal behind: turn hard towards it
+            turn = math.copysign(max(abs(turn), abs(err)), err)
+        turn = max(-math.pi, min(math.pi, turn))
+        return v, turn, gamma
+
+    def predict(
+        self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True
+    ) -> tuple[Any, None]:
+        """The action for the current env state (``observation`` is not needed: the rule reads the
+        aircraft's own measurements from ``env.unwrapped``)."""
+        env = self._require_env()
+        v, turn, gamma = self.intent()
+        space = env.action_space
+        model = cast(Any, env.unwrapped).model
+        if isinstance(space, gym.spaces.Discrete):
+            return np.int64(self._nearest_primitive(model, v, turn, gamma, action_mask_of(env))), None
+        ts = self._step_duration()
+        lo, hi = model.control_low, model.control_high
+        control = np.clip(np.array([v, turn / ts, gamma]), lo, hi)
+        return np.clip(model.control_to_action(control), -1.0, 1.0).astype(np.float32), None
+
+    @staticmethod
+    def _nearest_primitive(model: Any, v: float, turn: float, gamma: float, mask: np.ndarray | None) -> int:
+        """The primitive closest to (airspeed, total turn, path angle) in a weighted distance."""
+        tab = model.library.table
+        ts = model.library.duration
+        total_turn = 0.5 * (tab[:, COL_CHI_DOT_1] + tab[:, COL_CHI_DOT_2]) * ts
+        d = (
+            ((tab[:, COL_AIRSPEED] - v) / 10.0) ** 2
+            + ((total_turn - turn) / math.radians(30.0)) ** 2
+            + ((tab[:, COL_GAMMA] - gamma) / math.radians(15.0)) ** 2
+        )
+        # A circle in lift must be a spiral (curves and splines turn at most 90 deg in total).
+        if abs(turn) >= 1.5 * math.pi:
+            d = d + 1e6 * (tab[:, COL_FAMILY] != SPIRAL)
+        if mask is not None:
+            d = np.where(mask, d, np.inf)
+        return int(np.argmin(d))
+
+    def _step_duration(self) -> float:
+        """Seconds one env step holds an action: Ts of the env's primitive library (both envs)."""
+        base: Any = self._require_env().unwrapped
+        return float(base.model.library.duration)
+
+    def _require_env(self) -> gym.Env:
+        if self._env is None:
+            raise RuntimeError(f"{type(self).__name__}.predict called before reset(env, seed)")
+        return self._env
+
+
+class PPOAgent:
+    """A trained stable-baselines3 (or sb3-contrib ``MaskablePPO``) policy behind the agent interface.
+
+    :param path: the run directory written by :func:`baselines.ppo.train` (holding ``model.zip`` and
+        ``config.json``), or the ``.zip`` itself with ``config.json`` beside it.
+    :param deterministic: act with the policy's mode (default) rather than sampling.
+    :param name: label in results; default ``"ppo-<algo>"`` from the configuration.
+    """
+
+    def __init__(self, path: str | Path, *, deterministic: bool = True, name: str | None = None) -> None:
+        p = Path(path)
+        run_dir = p.parent if p.suffix == ".zip" else p
+        zip_path = p if p.suffix == ".zip" else p / "model.zip"
+        cfg_path = run_dir / "config.json"
+        if not zip_path.is_file():
+            raise FileNotFoundError(f"no trained model at {zip_path}; train one with scripts/train_ppo.py")
+        if not cfg_path.is_file():
+            raise FileNotFoundError(f"no config.json beside {zip_path}; a model is loaded with its configuration")
+        self.config: dict[str, Any] = json.loads(cfg_path.read_text())
+        self.algo: str = self.config["algo"]
+        self.env_id: str = self.config["env_id"]
+        self.name = name or f"ppo-{self.algo}"
+        self.deterministic = deterministic
+        self.model_path = zip_path
+        from baselines.ppo import action_transform, load_model, observation_transform  # lazy: torch
+
+        self.model = load_model(zip_path, self.algo)
+        self._obs_fn = observation_transform(self.config)
+        self._act_fn = action_transform(self.config)
+        self._env: gym.Env | None = None
+
+    def reset(self, env: gym.Env, seed: int | None = None) -> None:
+        """Remember ``env`` (for its action space and action masks); the policy is deterministic."""
+        if env.spec is not None and env.spec.id.split(":")[-1] != self.env_id.split(":")[-1]:
+            raise ValueError(f"{self.name} was trained on {self.env_id!r}, not on {env.spec.id!r}")
+        self._env = env
+
+    def predict(
+        self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool | None = None
+    ) -> tuple[Any, Any]:
+        """The policy's action; masked PPO also passes the env's current action mask."""
+        det = self.deterministic if deterministic is None else deterministic
+        obs = self._obs_fn(observation) if self._obs_fn is not None else observation
+        kwargs: dict[str, Any] = {}
+        if self.algo == "masked":
+            if self._env is None:
+                raise RuntimeError("PPOAgent.predict for a masked policy needs reset(env, seed) first")
+            kwargs["action_masks"] = action_mask_of(self._env)
+        action, st = self.model.predict(obs, state=state, episode_start=episode_start, deterministic=det, **kwargs)
+        if self._act_fn is not None:
+            action = self._act_fn(action)
+        if isinstance(self._env, gym.Env) and isinstance(self._env.action_space, gym.spaces.Discrete):
+            action = np.int64(np.asarray(action).item())
+        return action, st
+
+
+class SSTPlannerAgent:
+    """The SST planner (:class:`baselines.sst.SSTAgent`) behind the common interface.
+
+    ``reset(env, seed)`` builds a fresh planner seeded with the episode seed and plans from the
+    env's current state (that time is compute time); ``predict`` returns the plan's actions and
+    replans when the plan is used up or the state deviates (see :class:`baselines.sst.SSTAgent`).
+    The primitive or continuous sampler follows the env's action space.
+
+    :param time_limit: wall-clock budget per planning call [s] (None: iterations only).
+    :param max_iterations: iteration budget per planning call (None: time only; with an iteration
+        budget alone the plans, and so the evaluation, are deterministic).
+    :param name: label in results.
+    """
+
+    def __init__(
+        self, *, time_limit: float | None = 20.0, max_iterations: int | None = None, name: str = "sst"
+    ) -> None:
+        self.name = name
+        self.time_limit = time_limit
+        self.max_iterations = max_iterations
+        self.planner: Any = None
+
+    def reset(self, env: gym.Env, seed: int | None = None) -> None:
+        """Plan for the episode that ``env`` (already reset) is in."""
+        from baselines.sst import SSTAgent
+
+        self.planner = SSTAgent(
+            env, time_limit=self.time_limit, max_iterations=self.max_iterations, seed=int(seed or 0)
+        )
+        self.planner.reset()
+
+    def predict(
+        self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True
+    ) -> tuple[Any, None]:
+        """The next action of the plan."""
+        if self.planner is None:
+            raise RuntimeError("SSTPlannerAgent.predict called before reset(env, seed)")
+        return self.planner.predict(observation, state, episode_start, deterministic)

@@ -1,0 +1,594 @@
+"""Evaluation: agents x scenarios x seeds -> a results file, a markdown table and plots.
+
+Every agent -- the SST planners, PPO, the random agent and the heuristic -- is executed and scored
+through ``env.step`` of the same registered envs, on the same scenarios (passed with
+``env.reset(seed=seed, options={"scenario": sc})``). The SST planners know the thermal field (they
+plan on the env's model); PPO sees the observation (which lists the nearest thermals); the
+heuristic senses only the updraft around the aircraft; the random agent sees nothing.
+
+Per episode: success (``info["is_success"]``), energy spent [J/kg] (``info["energy_spent"]``),
+flight time [s] (``env.unwrapped.time``), number of decisions, return, and compute time: the
+agent's ``reset`` (where a planner plans) plus all its ``predict`` calls, in total and per
+decision. The flown path (every output point of every edge) is kept for plots.
+
+Scenario names: the named scenarios of :mod:`soaring_env.scenario` (``"paper"``) and
+``"random-<seed>"`` -- ``make_scenario(np.random.default_rng(seed))``; the held-out set is
+``random-10000``, ``random-10001``, ... (:func:`heldout_names`), disjoint from the validation
+seeds used during training (5000+) and from the training scenarios (drawn from each env's own
+``np_random`` stream).
+
+Results are written atomically (:func:`soaring_env.scenario.atomic_write_text`) after every
+episode; a rerun with the same output directory resumes, reusing the episodes whose agent
+settings (budget, model file) are unchanged.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import platform
+import re
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from soaring_env._validation import ConfigError
+from soaring_env.scenario import SCENARIOS, Scenario, atomic_write_text, get_scenario, make_scenario
+
+DISCRETE_ID = "soaring/Soaring-v0"
+CONTINUOUS_ID = "soaring/SoaringContinuous-v0"
+HELDOUT_SEED0 = 10_000
+RESULTS_FILE = "results.json"
+TABLE_FILE = "results.md"
+SCHEMA = 1
+#: The agent whose energy the others are compared with, on the episodes both solve.
+REFERENCE_AGENT = "sst-primitives"
+#: Known agent names, in table order.
+AGENT_NAMES = (
+    "sst-primitives",
+    "sst-continuous",
+    "ppo-discrete",
+    "ppo-masked",
+    "ppo-continuous",
+    "heuristic",
+    "heuristic-continuous",
+    "random",
+)
+#: PPO agent name -> training algorithm (see :data:`baselines.ppo.ALGOS`).
+PPO_AGENTS = {"ppo-discrete": "discrete", "ppo-masked": "masked", "ppo-continuous": "continuous"}
+_RANDOM_RE = re.compile(r"^random-(\d+)$")
+
+
+@dataclass(frozen=True)
+class EvalConfig:
+    """What to evaluate and how.
+
+    :param agents: agent names (see :data:`AGENT_NAMES`).
+    :param scenarios: scenario names (``"paper"``, ``"random-<seed>"``).
+    :param seeds: episode seeds: ``env.reset(seed=...)`` and ``agent.reset(env, seed)``.
+    :param sst_time_budget: SST planning budget per planning call [s] (None: iterations only).
+    :param sst_iterations: SST iteration budget per planning call (None: time only). With a time
+        budget the results depend on the machine's speed; an iteration budget alone is deterministic.
+    :param ppo_dirs: PPO agent name -> run directory of :func:`baselines.ppo.train`.
+    :param ppo_model: ``"best"`` (best validation return during training) or ``"final"``.
+    :param env_kwargs: extra ``gym.make`` keywords for every env (must match PPO training).
+    :param keep_paths: store the flown path of every episode (for trajectory plots).
+    """
+
+    agents: tuple[str, ...] = ("sst-primitives", "sst-continuous", "heuristic", "random")
+    scenarios: tuple[str, ...] = ("paper",)
+    seeds: tuple[int, ...] = (0,)
+    sst_time_budget: float | None = 20.0
+    sst_iterations: int | None = None
+    ppo_dirs: Mapping[str, str] = field(default_factory=dict)
+    ppo_model: str = "best"
+    env_kwargs: Mapping[str, Any] = field(default_factory=dict)
+    keep_paths: bool = True
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "agents", tuple(self.agents))
+        object.__setattr__(self, "scenarios", tuple(self.scenarios))
+        object.__setattr__(self, "seeds", tuple(int(s) for s in self.seeds))
+        object.__setattr__(self, "ppo_dirs", {k: str(v) for k, v in dict(self.ppo_dirs).items()})
+        object.__setattr__(self, "env_kwargs", dict(self.env_kwargs))
+        for a in self.agents:
+            check_agent_name(a)
+        for s in self.scenarios:
+            check_scenario_name(s)
+        for k in self.ppo_dirs:
+            if k not in PPO_AGENTS:
+                raise ConfigError(f"ppo_dirs key {k!r} is not a PPO agent; known: {', '.join(PPO_AGENTS)}")
+        if not self.agents or not self.scenarios or not self.seeds:
+            raise ConfigError("agents, scenarios and seeds must each name at least one")
+        if len(set(self.agents)) != len(self.agents) or len(set(self.scenarios)) != len(self.scenarios):
+            raise ConfigError("agents and scenarios must not repeat")
+        if self.sst_time_budget is None and self.sst_iterations is None:
+            raise ConfigError("SST needs a budget: sst_time_budget and/or sst_iterations")
+        if self.ppo_model not in ("best", "final"):
+            raise ConfigError(f"ppo_model={self.ppo_model!r} is unknown; known: best, final")
+
+
+# --- names ----------------------------------------------------------------------------------------
+def check_agent_name(name: str) -> str:
+    """``name`` if it is a known agent, else a :class:`ConfigError` listing the known ones."""
+    if name not in AGENT_NAMES:
+        raise ConfigError(f"agent {name!r} is unknown; known: {', '.join(AGENT_NAMES)}")
+    return name
+
+
+def check_scenario_name(name: str) -> str:
+    """``name`` if it names a scenario, else a :class:`ConfigError` listing the known ones."""
+    if name in SCENARIOS or _RANDOM_RE.match(name):
+        return name
+    known = [*sorted(SCENARIOS), "random-<seed> (held-out: random-10000, random-10001, ...)"]
+    raise ConfigError(f"scenario {name!r} is unknown; known: {', '.join(known)}")
+
+
+def heldout_names(n: int, start: int = HELDOUT_SEED0) -> list[str]:
+    """Names of the first ``n`` held-out random scenarios."""
+    return [f"random-{start + k}" for k in range(n)]
+
+
+def resolve_scenario(name: str, random_scenario: Mapping[str, Any] | None = None) -> Scenario:
+    """The scenario called ``name`` (``"random-<seed>"`` uses ``make_scenario`` with that seed and
+    the env's ``random_scenario`` keywords, so held-out scenarios follow the training distribution)."""
+    check_scenario_name(name)
+    m = _RANDOM_RE.match(name)
+    if m:
+        sc = make_scenario(np.random.default_rng(int(m.group(1))), **dict(random_scenario or {}))
+        return sc.replace(name=name)
+    return get_scenario(name)
+
+
+# --- agents -----------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class AgentSpec:
+    """How to build one agent: its env and a factory. ``settings`` fingerprint it for resuming."""
+
+    name: str
+    env_id: str
+    factory: Callable[[], Any]
+    settings: Mapping[str, Any]
+
+
+def _file_digest(path: Path) -> str:
+    h = hashlib.sha256()
+    with path.open("rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()[:16]
+
+
+def ppo_model_path(run_dir: str | Path, which: str = "best") -> Path:
+    """``best_model.zip`` (if ``which == "best"`` and it exists) or ``model.zip`` of a run directory."""
+    d = Path(run_dir)
+    best = d / "best_model.zip"
+    if which == "best" and best.is_file():
+        return best
+    return d / "model.zip"
+
+
+def agent_spec(name: str, config: EvalConfig) -> AgentSpec:
+    """The :class:`AgentSpec` of agent ``name`` under ``config``; raises for unknown names."""
+    check_agent_name(name)
+    if name.startswith("sst-"):
+        sampler = "primitive" if name == "sst-primitives" else "continuous"
+        env_id = DISCRETE_ID if sampler == "primitive" else CONTINUOUS_ID
+        settings = {"sampler": sampler, "time_budget": config.sst_time_budget, "iterations": config.sst_iterations}
+
+        def make_sst() -> Any:
+            from baselines.agents import SSTPlannerAgent
+
+            return SSTPlannerAgent(time_limit=config.sst_time_budget, max_iterations=config.sst_iterations, name=name)
+
+        return AgentSpec(name, env_id, make_sst, settings)
+    if name in PPO_AGENTS:
+        algo = PPO_AGENTS[name]
+        run_dir = config.ppo_dirs.get(name)
+        if run_dir is None:
+            raise ConfigError(f"agent {name!r} needs a trained model: give its run directory (ppo_dirs / --ppo-dir)")
+        path = ppo_model_path(run_dir, config.ppo_model)
+        if not path.is_file():
+            raise ConfigError(f"agent {name!r}: no trained model at {path}; train one with scripts/train_ppo.py")
+        cfg = json.loads((Path(run_dir) / "config.json").read_text())
+        if cfg.get("algo") != algo:
+            raise ConfigError(f"agent {name!r} needs a {algo!r} model, but {run_dir} holds {cfg.get('algo')!r}")
+
+        def make_ppo() -> Any:
+            from baselines.agents import PPOAgent
+
+            return PPOAgent(path, name=name)
+
+        return AgentSpec(name, cfg["env_id"], make_ppo, {"model": str(path), "sha256": _file_digest(path)})
+    from baselines.agents import HeuristicAgent, RandomAgent
+
+    if name == "random":
+        return AgentSpec(name, DISCRETE_ID, lambda: RandomAgent(use_masks=True, name=name), {"use_masks": True})
+    env_id = CONTINUOUS_ID if name == "heuristic-continuous" else DISCRETE_ID
+    return AgentSpec(name, env_id, lambda: HeuristicAgent(name=name), {"rule": "v1"})
+
+
+# --- running -------------------------------------------------------------------------------------------
+def make_env(env_id: str, env_kwargs: Mapping[str, Any] | None = None) -> gym.Env:
+    """A registered soaring env (imports :mod:`soaring_env` to register the ids)."""
+    import soaring_env  # noqa: F401
+
+    return gym.make(env_id, **dict(env_kwargs or {}))
+
+
+def run_episode(env: gym.Env, agent: Any, scenario: Scenario, seed: int, keep_path: bool = True) -> dict[str, Any]:
+    """One episode of ``agent`` on ``scenario`` through ``env.step``; returns the episode record."""
+    base: Any = env.unwrapped
+    obs, info = env.reset(seed=seed, options={"scenario": scenario})
+    t0 = time.perf_counter()
+    agent.reset(env, seed)
+    plan_s = time.perf_counter() - t0
+    predict_s = 0.0
+    n = 0
+    ret = 0.0
+    terminated = truncated = False
+    while not (terminated or truncated):
+        t1 = time.perf_counter()
+        action, _ = agent.predict(obs, deterministic=True)
+        predict_s += time.perf_counter() - t1
+        obs, reward, terminated, truncated, info = env.step(action)
+        n += 1
+        ret += float(reward)
+    total = plan_s + predict_s
+    end = np.asarray(base.state, dtype=np.float64)
+    path = None
+    if keep_path:  # every flown output point (the env keeps them), [north, east, height] to 0.1 m
+        path = np.round(np.asarray(base.path, dtype=np.float64)[:, [0, 1, 3]], 1).tolist()
+    return {
+        "success": bool(info.get("is_success", False)),
+        "outcome": str(info.get("outcome", "success" if info.get("is_success") else "failure")),
+        "terminated": bool(terminated),
+        "truncated": bool(truncated),
+        "energy_spent": float(info["energy_spent"]),
+        "flight_time": float(base.time),
+        "decisions": n,
+        "return": ret,
+        "final_height": float(end[3]),
+        "compute_total_s": total,
+        "compute_plan_s": plan_s,
+        "compute_per_decision_s": total / max(n, 1),
+        "path": path,
+    }
+
+
+def _key(agent: str, scenario: str, seed: int) -> str:
+    return f"{agent}|{scenario}|{seed}"
+
+
+def _load_results(path: Path) -> dict[str, Any] | None:
+    if not path.is_file():
+        return None
+    data = json.loads(path.read_text())
+    if data.get("schema") != SCHEMA:
+        raise ConfigError(f"{path} has results schema {data.get('schema')!r}, expected {SCHEMA}; use a new directory")
+    return data
+
+
+def run_evaluation(
+    config: EvalConfig,
+    out_dir: str | Path,
+    *,
+    resume: bool = True,
+    progress: bool = False,
+    log: Callable[[str], None] | None = None,
+) -> dict[str, Any]:
+    """Run every (agent, scenario, seed) of ``config``; write ``results.json`` after each episode.
+
+    :param resume: reuse episodes already in ``out_dir/results.json`` whose agent settings match.
+    :param progress: show a tqdm progress bar.
+    :param log: called with one line per episode (e.g. ``print``; through tqdm while ``progress``).
+    :returns: the results dict (also on disk).
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    res_path = out / RESULTS_FILE
+    specs = {a: agent_spec(a, config) for a in config.agents}
+    random_kw = dict(config.env_kwargs.get("random_scenario", {}))
+    scenarios = {s: resolve_scenario(s, random_kw) for s in config.scenarios}
+    old = _load_results(res_path) if resume else None
+    done: dict[str, dict[str, Any]] = {}
+    if old is not None:
+        if old["meta"].get("env_kwargs") != _jsonable(config.env_kwargs):
+            was = old["meta"].get("env_kwargs")
+            raise ConfigError(f"{res_path} was made with env_kwargs {was!r}; use a new directory")
+        old_settings = old["meta"].get("agents", {})
+        for ep in old["episodes"]:
+            a = ep["agent"]
+            if a in specs and old_settings.get(a) == _jsonable(specs[a].settings):
+                done[_key(a, ep["scenario"], ep["seed"])] = ep
+    meta = {
+        "schema": SCHEMA,
+        "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        "machine": platform.platform(),
+        "processor": platform.processor() or platform.machine(),
+        "env_kwargs": _jsonable(config.env_kwargs),
+        "agents": {a: _jsonable(s.settings) for a, s in specs.items()},
+        "agent_envs": {a: s.env_id for a, s in specs.items()},
+        "scenarios": {s: sc.to_dict() for s, sc in scenarios.items()},
+        "seeds": list(config.seeds),
+        "config": {
+            "sst_time_budget": config.sst_time_budget,
+            "sst_iterations": config.sst_iterations,
+            "ppo_model": config.ppo_model,
+        },
+    }
+    episodes: list[dict[str, Any]] = []
+    keys_wanted = [(a, s, seed) for a in config.agents for s in config.scenarios for seed in config.seeds]
+    # Keep finished episodes of other agents/scenarios too (a results file can grow run by run).
+    if old is not None:
+        wanted = {_key(*k) for k in keys_wanted}
+        for ep in old["episodes"]:
+            k = _key(ep["agent"], ep["scenario"], ep["seed"])
+            a = ep["agent"]
+            same = a not in specs or old["meta"]["agents"].get(a) == _jsonable(specs[a].settings)
+            if k not in wanted and same:
+                episodes.append(ep)
+                meta["agents"].setdefault(ep["agent"], old["meta"]["agents"].get(ep["agent"]))
+                meta["agent_envs"].setdefault(ep["agent"], old["meta"].get("agent_envs", {}).get(ep["agent"]))
+                meta["scenarios"].setdefault(ep["scenario"], old["meta"]["scenarios"].get(ep["scenario"]))
+
+    def save() -> None:
+        data = {"schema": SCHEMA, "meta": meta, "episodes": episodes}
+        atomic_write_text(res_path, json.dumps(data, separators=(",", ":")))
+
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=len(keys_wanted), desc="episodes", unit="ep")
+    envs: dict[str, gym.Env] = {}
+    try:
+        for agent_name in config.agents:
+            spec = specs[agent_name]
+            agent = None
+            for sc_name in config.scenarios:
+                for seed in config.seeds:
+                    k = _key(agent_name, sc_name, seed)
+                    if k in done:
+                        episodes.append(done[k])
+                        if bar is not None:
+                            bar.update(1)
+                        continue
+                    if agent is None:
+                        agent = spec.factory()
+                    if spec.env_id not in envs:
+                        envs[spec.env_id] = make_env(spec.env_id, config.env_kwargs)
+                    rec = run_episode(envs[spec.env_id], agent, scenarios[sc_name], seed, config.keep_paths)
+                    rec = {"agent": agent_name, "scenario": sc_name, "seed": seed, "env_id": spec.env_id, **rec}
+                    episodes.append(rec)
+                    save()
+                    if log is not None:
+                        (bar.write if bar is not None else log)(
+                            f"{agent_name:>16s} {sc_name:>12s} seed {seed}: "
+                            f"{'goal' if rec['success'] else rec['outcome']:>13s} "
+                            f"E={rec['energy_spent'] / 1000:7.2f} kJ/kg t={rec['flight_time']:5.0f} s "
+                            f"compute={rec['compute_total_s']:.2f} s"
+                        )
+                    if bar is not None:
+                        bar.update(1)
+    finally:
+        for env in envs.values():
+            env.close()
+        if bar is not None:
+            bar.close()
+    save()
+    return {"schema": SCHEMA, "meta": meta, "episodes": episodes}
+
+
+def _jsonable(x: Any) -> Any:
+    return json.loads(json.dumps(x, default=str))
+
+
+# --- summaries ---------------------------------------------------------------------------------------
+def load_results(path: str | Path) -> dict[str, Any]:
+    """Read a results file (or the ``results.json`` in a directory)."""
+    p = Path(path)
+    if p.is_dir():
+        p = p / RESULTS_FILE
+    data = _load_results(p)
+    if data is None:
+        raise FileNotFoundError(f"no results at {p}")
+    return data
+
+
+def _stats(values: Iterable[float]) -> tuple[float, float, int]:
+    v = np.asarray(list(values), dtype=np.float64)
+    if v.size == 0:
+        return math.nan, math.nan, 0
+    return float(v.mean()), float(v.std(ddof=1)) if v.size > 1 else 0.0, int(v.size)
+
+
+def summarize(results: Mapping[str, Any], reference: str = REFERENCE_AGENT) -> list[dict[str, Any]]:
+    """Per agent: success rate, energy [J/kg] over its successes and over the (scenario, seed)
+    pairs that it and ``reference`` both solve (with the ratio of those means), flight time [s]
+    over successes, compute time per decision and per episode [s]."""
+    eps = results["episodes"]
+    agents = [a for a in AGENT_NAMES if any(e["agent"] == a for e in eps)]
+    agents += sorted({e["agent"] for e in eps} - set(agents))
+    ref_ok = {(e["scenario"], e["seed"]): e for e in eps if e["agent"] == reference and e["success"]}
+    rows = []
+    for a in agents:
+        mine = [e for e in eps if e["agent"] == a]
+        ok = [e for e in mine if e["success"]]
+        common = [(e, ref_ok[(e["scenario"], e["seed"])]) for e in ok if (e["scenario"], e["seed"]) in ref_ok]
+        e_mean, e_std, _ = _stats(e["energy_spent"] for e in ok)
+        c_mine, _, n_common = _stats(e["energy_spent"] for e, _ in common)
+        c_ref, _, _ = _stats(r["energy_spent"] for _, r in common)
+        t_mean, t_std, _ = _stats(e["flight_time"] for e in ok)
+        rows.append(
+            {
+                "agent": a,
+                "episodes": len(mine),
+                "successes": len(ok),
+                "success_rate": len(ok) / len(mine) if mine else math.nan,
+                "energy_mean": e_mean,
+                "energy_std": e_std,
+                "common": n_common,
+                "energy_common": c_mine,
+                "energy_common_ref": c_ref,
+                "energy_ratio": c_mine / c_ref if n_common and c_ref > 0 else math.nan,
+                "flight_time_mean": t_mean,
+                "flight_time_std": t_std,
+                "decisions_mean": _stats(e["decisions"] for e in mine)[0],
+                "compute_per_decision_s": _stats(e["compute_per_decision_s"] for e in mine)[0],
+                "compute_total_s": _stats(e["compute_total_s"] for e in mine)[0],
+            }
+        )
+    return rows
+
+
+def _f(x: float, fmt: str) -> str:
+    return "–" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, fmt)
+
+
+def markdown_table(results: Mapping[str, Any], reference: str = REFERENCE_AGENT) -> str:
+    """The summary as a GitHub markdown table (energies in kJ/kg)."""
+    rows = summarize(results, reference)
+    head = (
+        "| agent | success | energy, successes [kJ/kg] | energy on common successes [kJ/kg] "
+        f"| × {reference} | flight time [s] | compute / decision [ms] | compute / episode [s] |\n"
+        "|---|---:|---:|---:|---:|---:|---:|---:|\n"
+    )
+    lines = []
+    for r in rows:
+        lines.append(
+            f"| {r['agent']} | {r['successes']}/{r['episodes']} ({_f(100 * r['success_rate'], '.0f')} %) "
+            f"| {_f(r['energy_mean'] / 1000, '.2f')} ± {_f(r['energy_std'] / 1000, '.2f')} "
+            f"| {_f(r['energy_common'] / 1000, '.2f')} vs {_f(r['energy_common_ref'] / 1000, '.2f')} (n={r['common']}) "
+            f"| {_f(r['energy_ratio'], '.2f')} "
+            f"| {_f(r['flight_time_mean'], '.0f')} ± {_f(r['flight_time_std'], '.0f')} "
+            f"| {_f(1000 * r['compute_per_decision_s'], '.3g')} | {_f(r['compute_total_s'], '.3g')} |"
+        )
+    return head + "\n".join(lines) + "\n"
+
+
+def write_report(results: Mapping[str, Any], out_dir: str | Path, reference: str = REFERENCE_AGENT) -> list[Path]:
+    """Write ``results.md`` (table + settings) and the plots; returns the files written."""
+    out = Path(out_dir)
+    meta = results["meta"]
+    cfg = meta.get("config", {})
+    n_sc = len({e["scenario"] for e in results["episodes"]})
+    n_seeds = len({e["seed"] for e in results["episodes"]})
+    text = (
+        markdown_table(results, reference) + f"\n{n_sc} scenarios x {n_seeds} seeds; SST budget per planning call: "
+        f"{cfg.get('sst_time_budget')} s / {cfg.get('sst_iterations')} iterations; machine: {meta.get('machine')}.\n"
+        "Energy = net specific energy spent (fuel + potential + kinetic) [kJ/kg], mean ± sd over successful "
+        f"episodes; 'common' = (scenario, seed) pairs solved by both the agent and {reference}, "
+        "× = ratio of those means. SST knows the thermal field; compute time includes SST's planning.\n"
+    )
+    files = [out / TABLE_FILE]
+    atomic_write_text(files[0], text)
+    files.append(plot_boxes(results, out / "boxplots.png"))
+    files.append(plot_trajectories(results, out / "trajectories.png"))
+    return files
+
+
+# --- plots ---------------------------------------------------------------------------------------------
+def _plt() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _agent_order(results: Mapping[str, Any]) -> list[str]:
+    present = {e["agent"] for e in results["episodes"]}
+    return [a for a in AGENT_NAMES if a in present] + sorted(present - set(AGENT_NAMES))
+
+
+def plot_boxes(results: Mapping[str, Any], png: str | Path) -> Path:
+    """Box plots of energy spent [kJ/kg] and flight time [s] per agent (successful episodes)."""
+    plt = _plt()
+    agents = _agent_order(results)
+    eps = results["episodes"]
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5), constrained_layout=True)
+    for ax, key, scale, label in (
+        (axes[0], "energy_spent", 1e-3, "energy spent [kJ/kg]"),
+        (axes[1], "flight_time", 1.0, "flight time [s]"),
+    ):
+        data = [[scale * e[key] for e in eps if e["agent"] == a and e["success"]] for a in agents]
+        ticks = [f"{a}\n({len(d)} ok)" for a, d in zip(agents, data, strict=True)]
+        pos = [i for i, d in enumerate(data) if d]
+        if pos:
+            ax.boxplot([data[i] for i in pos], positions=pos, widths=0.6, showmeans=True)
+        ax.set_xticks(range(len(agents)), ticks, rotation=30, ha="right", fontsize=8)
+        ax.set_xlim(-0.6, len(agents) - 0.4)
+        ax.set_ylabel(label)
+        ax.grid(axis="y", alpha=0.3)
+    axes[0].set_title("energy spent, successful episodes")
+    axes[1].set_title("flight time, successful episodes")
+    out = Path(png)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def plot_trajectories(
+    results: Mapping[str, Any], png: str | Path, scenarios: Sequence[str] | None = None, seed: int | None = None
+) -> Path:
+    """Top view of each agent's path over the updraft field, one panel per scenario (default: the
+    first three scenarios of the results; seed: the first). Contours: updraft [m/s] at the mean of
+    start and goal height; circle: goal region; dots: thermal centres."""
+    plt = _plt()
+    eps = [e for e in results["episodes"] if e.get("path")]
+    if not eps:
+        raise ValueError("the results hold no paths (keep_paths=False)")
+    names = list(scenarios) if scenarios is not None else list(dict.fromkeys(e["scenario"] for e in eps))[:3]
+    seed = seed if seed is not None else min(e["seed"] for e in eps)
+    agents = _agent_order(results)
+    colors = {a: plt.get_cmap("tab10")(i % 10) for i, a in enumerate(agents)}
+    fig, axes = plt.subplots(1, len(names), figsize=(5.6 * len(names), 5.6), constrained_layout=True, squeeze=False)
+    for ax, sc_name in zip(axes[0], names, strict=True):
+        sc = Scenario.from_dict(results["meta"]["scenarios"][sc_name])
+        runs = [e for e in eps if e["scenario"] == sc_name and e["seed"] == seed]
+        pts = np.array(
+            [p for e in runs for p in e["path"]] + [[sc.start[0], sc.start[1], sc.start[3]], list(sc.goal.centre)]
+        )
+        lo = pts[:, :2].min(axis=0) - 400.0
+        hi = pts[:, :2].max(axis=0) + 400.0
+        b = sc.bounds
+        lo = np.maximum(lo, [b.north_min, b.east_min])
+        hi = np.minimum(hi, [b.north_max, b.east_max])
+        nn, ee = np.meshgrid(np.linspace(lo[0], hi[0], 160), np.linspace(lo[1], hi[1], 160), indexing="ij")
+        h_ref = 0.5 * (sc.start[3] + sc.goal.height)
+        w = sc.field.updraft(nn, ee, np.full_like(nn, h_ref))
+        if np.ptp(w) > 0:
+            cs = ax.contourf(ee, nn, w, levels=12, cmap="Greys", alpha=0.55)
+            fig.colorbar(cs, ax=ax, shrink=0.7, label=f"updraft at {h_ref:.0f} m [m/s]")
+        c = sc.field.centres()
+        if len(c):
+            ax.plot(c[:, 1], c[:, 0], "k+", ms=8)
+        th = np.linspace(0, 2 * np.pi, 100)
+        ax.plot(sc.goal.east + sc.goal.radius * np.sin(th), sc.goal.north + sc.goal.radius * np.cos(th), "g-", lw=2)
+        ax.plot(sc.start[1], sc.start[0], "go", ms=7)
+        for e in sorted(runs, key=lambda r: agents.index(r["agent"])):
+            p = np.asarray(e["path"])
+            style = "-" if e["success"] else ":"
+            ax.plot(p[:, 1], p[:, 0], style, color=colors[e["agent"]], lw=1.6, label=f"{e['agent']}")
+            ax.plot(p[-1, 1], p[-1, 0], "x" if not e["success"] else ".", color=colors[e["agent"]], ms=7)
+        ax.set_xlim(lo[1], hi[1])
+        ax.set_ylim(lo[0], hi[0])
+        ax.set_aspect("equal")
+        ax.set_xlabel("east [m]")
+        ax.set_ylabel("north [m]")
+        ax.set_title(
+            f"{sc_name} (seed {seed}); start height {sc.start[3]:.0f} m, goal {sc.goal.height:.0f} m", fontsize=9
+        )
+        ax.legend(fontsize=7, loc="best")
+    out = Path(png)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out

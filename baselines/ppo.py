@@ -1,0 +1,663 @@
+"""PPO baselines: train stable-baselines3 ``PPO`` / sb3-contrib ``MaskablePPO`` on the soaring envs.
+
+Three algorithms share one code path (:data:`ALGOS`):
+
+* ``"discrete"`` -- PPO on ``soaring/Soaring-v0`` (174 primitives, no masks);
+* ``"masked"`` -- sb3-contrib ``MaskablePPO`` on the same env, with the env's ``action_masks()``;
+* ``"continuous"`` -- PPO with a Gaussian policy on ``soaring/SoaringContinuous-v0``.
+
+Training draws a new random scenario from each env's ``np_random`` at every reset
+(``scenario="random"``); periodic evaluation runs on a fixed *validation* set of scenarios made by
+:func:`soaring_env.scenario.make_scenario` from seeds ``VALIDATION_SEED0 + k``, disjoint from the
+held-out test seeds ``HELDOUT_SEED0 + k`` of :mod:`baselines.evaluation`.
+
+A run directory holds ``model.zip`` (final), ``best_model.zip`` (best validation return),
+``config.json`` (the exact :class:`TrainConfig`, library versions, timings), ``evaluations.npz``
+(SB3's EvalCallback log), ``eval_log.json`` (the same per evaluation with success rate, energy and
+wall-clock time), ``learning_curve.png``, ``checkpoints/`` and, optionally, ``tb/`` (TensorBoard).
+
+torch runs with one thread per process (:func:`torch.set_num_threads`): on a small CPU machine the
+environments, not the 2 x 128 MLP, are the bottleneck.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import platform
+import sys
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from baselines.evaluation import HELDOUT_SEED0, resolve_scenario
+from soaring_env.scenario import Scenario, atomic_write_text
+
+DISCRETE_ID = "soaring/Soaring-v0"
+CONTINUOUS_ID = "soaring/SoaringContinuous-v0"
+#: Algorithm name -> env id it trains on.
+ALGOS: dict[str, str] = {"discrete": DISCRETE_ID, "masked": DISCRETE_ID, "continuous": CONTINUOUS_ID}
+VEC_ENVS = ("dummy", "subproc")
+#: Seeds of the validation scenarios watched during training (test seeds start at 10 000).
+VALIDATION_SEED0 = 5_000
+
+
+def _module_qualified(env_id: str) -> str:
+    """``"soaring_env:<id>"``: makes subprocess workers import (and so register) the package."""
+    return env_id if ":" in env_id else f"soaring_env:{env_id}"
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Everything that defines a training run; saved verbatim as ``config.json`` beside the model.
+
+    :param algo: ``"discrete"``, ``"masked"`` or ``"continuous"`` (see :data:`ALGOS`).
+    :param total_timesteps: environment steps (one primitive or control segment each) to train for.
+    :param max_minutes: wall-clock cap on training [min]; stops early, saving the model (None: no cap).
+    :param n_envs: parallel environments; more give PPO more diverse scenarios per update.
+    :param vec_env: ``"dummy"`` (in-process; fastest for this cheap env) or ``"subproc"``.
+    :param seed: seeds the policy, the env resets and hence the random training scenarios.
+    :param learning_rate: Adam step size; decays linearly to ``lr_final_fraction`` of it.
+    :param lr_final_fraction: learning-rate fraction left at the end (1.0: constant).
+    :param n_steps: rollout length per env and update (n_steps * n_envs samples per update).
+    :param batch_size: minibatch size of the PPO epochs.
+    :param n_epochs: passes over each rollout.
+    :param gamma: discount; episodes are ~10 steps of 30 s, so a short horizon suffices.
+    :param gae_lambda: GAE bias/variance trade-off.
+    :param clip_range: PPO ratio clip.
+    :param ent_coef: entropy bonus; None: 0.03 for the 174-way discrete policies (with 0.01 they
+        stalled at ~70 % validation success, never learning to climb to a higher goal), 0.01 for
+        the Gaussian policy.
+    :param vf_coef: value-loss weight.
+    :param max_grad_norm: gradient clipping.
+    :param net_arch: hidden layers of the separate policy and value MLPs.
+    :param log_std_init: initial log standard deviation of the continuous policy.
+    :param shaping: weight of this module's extra potential-based shaping (Ng et al. 1999),
+        ``shaping * (gamma * phi(s') - phi(s))`` with ``phi = -d_goal / 1 km``; 0 (default) leaves
+        the env's own reward (which already has a telescoping progress term) unchanged.
+    :param body_frame: observe through :class:`BodyFrameObservation` (goal, wind and thermal offsets
+        in the aircraft's frame, plus goal distance and bearing): the policy need not learn rotations.
+    :param turn_exponent: continuous only: the policy's turn channel is mapped through
+        :class:`TurnCurveAction` (``sign(u) |u|^p``) for fine steering; 1 switches it off.
+    :param env_kwargs: keyword arguments for ``gym.make`` (config fields of the env); the scenario
+        is forced to ``"random"`` for training.
+    :param eval_freq: evaluate every this many total timesteps.
+    :param n_eval_scenarios: validation scenarios per evaluation (one episode each).
+    :param checkpoint_freq: save a checkpoint every this many total timesteps (0: never).
+    :param tensorboard: write TensorBoard logs to ``<out_dir>/tb``.
+    :param progress_bar: show SB3's progress bar (tqdm + rich).
+    :param verbose: SB3 verbosity (1: training stats); -1 also silences the line per evaluation.
+    """
+
+    algo: str = "masked"
+    total_timesteps: int = 1_000_000
+    max_minutes: float | None = None
+    n_envs: int = 8
+    vec_env: str = "dummy"
+    seed: int = 0
+    learning_rate: float = 3e-4
+    lr_final_fraction: float = 0.1
+    n_steps: int = 256
+    batch_size: int = 256
+    n_epochs: int = 5
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    clip_range: float = 0.2
+    ent_coef: float | None = None
+    vf_coef: float = 0.5
+    max_grad_norm: float = 0.5
+    net_arch: tuple[int, ...] = (128, 128)
+    log_std_init: float = -0.5
+    shaping: float = 0.0
+    body_frame: bool = True
+    turn_exponent: float = 3.0
+    env_kwargs: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    eval_freq: int = 25_000
+    n_eval_scenarios: int = 40
+    checkpoint_freq: int = 500_000
+    tensorboard: bool = False
+    progress_bar: bool = True
+    verbose: int = 0
+
+    def __post_init__(self) -> None:
+        if self.algo not in ALGOS:
+            raise ValueError(f"algo={self.algo!r} is unknown; known: {', '.join(ALGOS)}")
+        if self.vec_env not in VEC_ENVS:
+            raise ValueError(f"vec_env={self.vec_env!r} is unknown; known: {', '.join(VEC_ENVS)}")
+        for name in ("total_timesteps", "n_envs", "n_steps", "batch_size", "n_epochs", "n_eval_scenarios"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"{name}={getattr(self, name)!r} must be >= 1")
+        if self.eval_freq < 1 or self.checkpoint_freq < 0:
+            raise ValueError("eval_freq must be >= 1 and checkpoint_freq >= 0")
+        if self.max_minutes is not None and not self.max_minutes > 0:
+            raise ValueError(f"max_minutes={self.max_minutes!r} must be > 0 or None")
+        if not 0.0 < self.gamma <= 1.0:
+            raise ValueError(f"gamma={self.gamma!r} must lie in (0, 1]")
+        object.__setattr__(self, "net_arch", tuple(int(n) for n in self.net_arch))
+        if self.ent_coef is None:
+            object.__setattr__(self, "ent_coef", 0.01 if self.algo == "continuous" else 0.03)
+        object.__setattr__(self, "env_kwargs", dict(self.env_kwargs))
+        if "scenario" in self.env_kwargs:
+            raise ValueError("env_kwargs must not set 'scenario': training always draws random scenarios")
+
+    @property
+    def env_id(self) -> str:
+        """The env this algorithm trains on."""
+        return ALGOS[self.algo]
+
+    def to_dict(self) -> dict[str, Any]:
+        d = dataclasses.asdict(self)
+        d["net_arch"] = list(self.net_arch)
+        d["env_kwargs"] = dict(self.env_kwargs)
+        d["env_id"] = self.env_id
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> TrainConfig:
+        names = {f.name for f in dataclasses.fields(cls)}
+        return cls(**{k: v for k, v in d.items() if k in names})
+
+
+# --- environments -------------------------------------------------------------------------------
+class GoalDistanceShaping(gym.Wrapper):
+    """Potential-based reward shaping towards the goal (Ng, Harada & Russell 1999).
+
+    Adds ``weight * (gamma * phi(s') - phi(s))`` with ``phi(s) = -d(s) / scale``, ``d`` the 3-D
+    distance [m] to the goal centre, and ``phi = 0`` at terminal states (goal, crash, out of
+    bounds) -- the form that provably keeps the optimal policies of the discounted problem.
+    Truncated (time-limit) steps keep ``phi(s')``: PPO bootstraps them.
+
+    :param weight: shaping weight [reward per ``scale``].
+    :param gamma: the discount of the learner.
+    :param scale: distance unit [m].
+    """
+
+    def __init__(self, env: gym.Env, weight: float = 1.0, gamma: float = 0.99, scale: float = 1000.0) -> None:
+        super().__init__(env)
+        self.weight = float(weight)
+        self.gamma = float(gamma)
+        self.scale = float(scale)
+        self._phi = 0.0
+
+    def potential(self) -> float:
+        """phi of the current state of the base env."""
+        base: Any = self.env.unwrapped
+        s = np.asarray(base.state, dtype=np.float64)
+        g = base.scenario.goal
+        d = float(g.distance(s[0], s[1], s[3]))
+        return -d / self.scale
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        obs, info = self.env.reset(**kwargs)
+        self._phi = self.potential()
+        return obs, info
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        phi_next = 0.0 if terminated else self.potential()
+        bonus = self.weight * (self.gamma * phi_next - self._phi)
+        self._phi = phi_next
+        info = dict(info)
+        info["shaping"] = bonus
+        return obs, float(reward) + bonus, terminated, truncated, info
+
+
+def body_frame(obs: np.ndarray, n_base: int = 11, n_thermal_features: int = 5) -> np.ndarray:
+    """Rotate the horizontal vectors of an observation into the aircraft's frame and append the
+    goal's horizontal distance and bearing.
+
+    The env reports the goal, wind and thermal offsets as (north, east) and the course as
+    (sin chi, cos chi); a policy must then learn a rotation (products of inputs) before it can steer.
+    Here each (north, east) pair becomes (ahead, right) = (n cos chi + e sin chi, -n sin chi + e cos chi),
+    and ``[|goal|, sin(bearing - chi), cos(bearing - chi)]`` are appended (distance in the env's
+    position units). Works on one observation (D,) or a batch (B, D); float32 in, float32 out.
+    """
+    o = np.asarray(obs, dtype=np.float32)
+    x = o.reshape(-1, o.shape[-1]).astype(np.float64)
+    s, c = x[:, 3], x[:, 4]
+    pairs = [(0, 1), (9, 10)]
+    n_th = (x.shape[1] - n_base) // n_thermal_features
+    pairs += [(n_base + n_thermal_features * j + 1, n_base + n_thermal_features * j + 2) for j in range(n_th)]
+    out = x.copy()
+    for i, k in pairs:
+        out[:, i] = x[:, i] * c + x[:, k] * s
+        out[:, k] = -x[:, i] * s + x[:, k] * c
+    dist = np.hypot(x[:, 0], x[:, 1])
+    safe = np.where(dist > 1e-9, dist, 1.0)
+    extra = np.stack(
+        [dist, np.where(dist > 1e-9, out[:, 1] / safe, 0.0), np.where(dist > 1e-9, out[:, 0] / safe, 1.0)], axis=1
+    )
+    res = np.concatenate([out, extra], axis=1).astype(np.float32)
+    return res.reshape(*o.shape[:-1], res.shape[-1])
+
+
+class BodyFrameObservation(gym.ObservationWrapper):
+    """Observation wrapper applying :func:`body_frame` (see there); bounds widen accordingly."""
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        space = env.observation_space
+        assert isinstance(space, gym.spaces.Box)
+        r = float(np.hypot(space.high[0], space.high[1]))  # a rotated pair can reach |(n, e)|
+        low = space.low.astype(np.float64).copy()
+        high = space.high.astype(np.float64).copy()
+        n_th = (space.shape[0] - 11) // 5
+        for i in [0, 1, 9, 10] + [11 + 5 * j + d for j in range(n_th) for d in (1, 2)]:
+            m = max(abs(low[i]), abs(high[i]))
+            low[i], high[i] = -m * math.sqrt(2.0), m * math.sqrt(2.0)
+        low = np.concatenate([low, [0.0, -1.0, -1.0]])
+        high = np.concatenate([high, [r, 1.0, 1.0]])
+        self.observation_space = gym.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
+
+    def observation(self, observation: np.ndarray) -> np.ndarray:
+        return body_frame(observation)
+
+
+def turn_curve(action: Any, exponent: float) -> np.ndarray:
+    """Map the policy's turn channel ``u`` (index 1) to the env's as ``sign(u) |u|^exponent``.
+
+    The continuous env spans +-1080 deg of turn per 30 s step, so an action of 0.1 already turns
+    108 deg: precise steering needs tiny actions. With exponent 3, u = 0.46 turns 108 deg, and the
+    full envelope (tight thermalling spirals) stays reachable at |u| = 1.
+    """
+    a = np.array(action, dtype=np.float32, copy=True)
+    u = a[..., 1]
+    a[..., 1] = np.sign(u) * np.abs(u) ** exponent
+    return a
+
+
+class TurnCurveAction(gym.ActionWrapper):
+    """Action wrapper applying :func:`turn_curve` (see there) before the continuous env."""
+
+    def __init__(self, env: gym.Env, exponent: float = 3.0) -> None:
+        super().__init__(env)
+        self.exponent = float(exponent)
+
+    def action(self, action: Any) -> np.ndarray:
+        return turn_curve(np.clip(action, -1.0, 1.0), self.exponent)
+
+
+class ScenarioCycle(gym.Wrapper):
+    """Resets walk through a fixed list of scenarios in order (for repeatable validation).
+
+    :param scenarios: the scenarios, passed as ``options={"scenario": ...}`` to the base env.
+    """
+
+    def __init__(self, env: gym.Env, scenarios: Sequence[Scenario]) -> None:
+        super().__init__(env)
+        if not scenarios:
+            raise ValueError("ScenarioCycle needs at least one scenario")
+        self.scenarios = list(scenarios)
+        self._k = 0
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        opts = dict(options or {})
+        opts.setdefault("scenario", self.scenarios[self._k % len(self.scenarios)])
+        self._k += 1
+        return self.env.reset(seed=seed, options=opts)
+
+
+def validation_scenarios(n: int, random_scenario: Mapping[str, Any] | None = None) -> list[Scenario]:
+    """The ``n`` validation scenarios (seeds ``VALIDATION_SEED0 ...``), disjoint from the test seeds."""
+    if n > HELDOUT_SEED0 - VALIDATION_SEED0:
+        raise ValueError(f"at most {HELDOUT_SEED0 - VALIDATION_SEED0} validation scenarios")
+    return [resolve_scenario(f"random-{VALIDATION_SEED0 + k}", random_scenario) for k in range(n)]
+
+
+def make_train_env(
+    env_id: str,
+    env_kwargs: Mapping[str, Any] | None = None,
+    shaping: float = 0.0,
+    gamma: float = 0.99,
+    body_frame: bool = True,
+    turn_exponent: float = 1.0,
+) -> gym.Env:
+    """One training env: random scenario at every reset, optional extra goal shaping and
+    body-frame observations.
+
+    Module-level (picklable) so that ``SubprocVecEnv`` workers can build it.
+    """
+    import soaring_env  # noqa: F401  (registers the env ids in this process)
+
+    env = gym.make(_module_qualified(env_id), scenario="random", **dict(env_kwargs or {}))
+    if shaping:
+        env = GoalDistanceShaping(env, weight=shaping, gamma=gamma)
+    return _wrap_policy_io(env, body_frame, turn_exponent)
+
+
+def _wrap_policy_io(env: gym.Env, body_frame: bool, turn_exponent: float) -> gym.Env:
+    if body_frame:
+        env = BodyFrameObservation(env)
+    if turn_exponent != 1.0 and isinstance(env.action_space, gym.spaces.Box):
+        env = TurnCurveAction(env, turn_exponent)
+    return env
+
+
+def make_eval_env(
+    env_id: str,
+    scenarios: Sequence[Scenario],
+    env_kwargs: Mapping[str, Any] | None = None,
+    body_frame: bool = True,
+    turn_exponent: float = 1.0,
+) -> gym.Env:
+    """One validation env cycling through ``scenarios`` (env reward only, no extra shaping)."""
+    import soaring_env  # noqa: F401
+
+    env: gym.Env = ScenarioCycle(gym.make(_module_qualified(env_id), **dict(env_kwargs or {})), scenarios)
+    return _wrap_policy_io(env, body_frame, turn_exponent)
+
+
+def observation_transform(run_record: Mapping[str, Any]) -> Callable[[Any], Any] | None:
+    """The observation transform a saved run was trained with (``config.json``), or None.
+
+    :class:`~baselines.agents.PPOAgent` applies it to the raw env observations, so a trained
+    policy runs in the plain registered env.
+    """
+    cfg = run_record.get("config", run_record)
+    return body_frame if cfg.get("body_frame", False) else None
+
+
+def action_transform(run_record: Mapping[str, Any]) -> Callable[[Any], Any] | None:
+    """The action transform a saved continuous run was trained with (``config.json``), or None."""
+    cfg = run_record.get("config", run_record)
+    p = float(cfg.get("turn_exponent", 1.0))
+    if cfg.get("algo") != "continuous" or p == 1.0:
+        return None
+    return lambda a: turn_curve(np.clip(a, -1.0, 1.0), p)
+
+
+def random_scenario_kwargs(env_kwargs: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The ``make_scenario`` keywords the env uses in random mode (so validation matches training)."""
+    return dict((env_kwargs or {}).get("random_scenario", {}))
+
+
+# --- models ----------------------------------------------------------------------------------------
+def _algo_class(algo: str) -> Any:
+    if algo == "masked":
+        from sb3_contrib import MaskablePPO
+
+        return MaskablePPO
+    from stable_baselines3 import PPO
+
+    return PPO
+
+
+def load_model(path: str | Path, algo: str) -> Any:
+    """Load a saved model of algorithm ``algo`` on the CPU."""
+    if algo not in ALGOS:
+        raise ValueError(f"algo={algo!r} is unknown; known: {', '.join(ALGOS)}")
+    import torch
+
+    torch.set_num_threads(1)
+    return _algo_class(algo).load(str(path), device="cpu")
+
+
+def _linear_schedule(start: float, final_fraction: float) -> Callable[[float], float]:
+    def schedule(progress_remaining: float) -> float:
+        return start * (final_fraction + (1.0 - final_fraction) * progress_remaining)
+
+    return schedule
+
+
+def _versions() -> dict[str, str]:
+    import importlib.metadata as md
+
+    out = {"python": sys.version.split()[0], "platform": platform.platform()}
+    for pkg in ("soaring-env", "numpy", "gymnasium", "stable-baselines3", "sb3-contrib", "torch"):
+        try:
+            out[pkg] = md.version(pkg)
+        except md.PackageNotFoundError:
+            out[pkg] = "not installed"
+    return out
+
+
+def _eval_callback(config: TrainConfig, eval_env: Any, out_dir: Path, t_start: float, n_eval_envs: int) -> Any:
+    """EvalCallback (MaskableEvalCallback for ``masked``) that also logs success, energy and time."""
+    from sb3_contrib.common.maskable.callbacks import MaskableEvalCallback
+    from stable_baselines3.common.callbacks import EvalCallback
+
+    base: Any = MaskableEvalCallback if config.algo == "masked" else EvalCallback
+
+    class LoggedEval(base):  # type: ignore[misc, valid-type]
+        """Adds energy of successful episodes and wall-clock time to every evaluation."""
+
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            super().__init__(*args, **kwargs)
+            self.records: list[dict[str, Any]] = []
+            self._energy: list[float] = []
+
+        def _log_success_callback(self, locals_: dict[str, Any], globals_: dict[str, Any]) -> None:
+            super()._log_success_callback(locals_, globals_)
+            if locals_["done"]:
+                info = locals_["info"]
+                if info.get("is_success") and "energy_spent" in info:
+                    self._energy.append(float(info["energy_spent"]))
+
+        def _on_step(self) -> bool:
+            n_before = len(self.evaluations_timesteps)
+            self._energy = []
+            cont = super()._on_step()
+            if len(self.evaluations_timesteps) > n_before:
+                succ = self.evaluations_successes[-1] if self.evaluations_successes else []
+                rec: dict[str, Any] = {
+                    "timesteps": int(self.num_timesteps),
+                    "wall_s": round(time.perf_counter() - t_start, 2),
+                    "mean_return": float(np.mean(self.evaluations_results[-1])),
+                    "std_return": float(np.std(self.evaluations_results[-1])),
+                    "success_rate": float(np.mean(succ)) if len(succ) else float("nan"),
+                    "mean_energy_success": float(np.mean(self._energy)) if self._energy else None,
+                    "mean_length": float(np.mean(self.evaluations_length[-1])),
+                }
+                self.records.append(rec)
+                self.logger.record("eval/success_rate_validation", rec["success_rate"])
+                if config.verbose >= 0:
+                    e = rec["mean_energy_success"]
+                    print(
+                        f"[{config.algo}] {rec['timesteps']:>9d} steps {rec['wall_s'] / 60:5.1f} min: "
+                        f"validation success {100 * rec['success_rate']:5.1f} %, return {rec['mean_return']:6.2f}, "
+                        f"energy {'-' if e is None else f'{e / 1000:.2f} kJ/kg'}",
+                        flush=True,
+                    )
+                atomic_write_text(out_dir / "eval_log.json", json.dumps(self.records, indent=1))
+            return cont
+
+    return LoggedEval(
+        eval_env,
+        n_eval_episodes=config.n_eval_scenarios,
+        eval_freq=max(1, config.eval_freq // config.n_envs),
+        log_path=str(out_dir),
+        best_model_save_path=str(out_dir),
+        deterministic=True,
+        verbose=0,
+        warn=False,
+    )
+
+
+def _wall_clock_callback(max_minutes: float, t_start: float) -> Any:
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class StopOnWallClock(BaseCallback):
+        """Stops training once ``max_minutes`` of wall-clock time have passed."""
+
+        def _on_step(self) -> bool:
+            return time.perf_counter() - t_start < 60.0 * max_minutes
+
+    return StopOnWallClock()
+
+
+def train(config: TrainConfig, out_dir: str | Path) -> Path:
+    """Train ``config`` and write the run directory ``out_dir`` (see the module docstring).
+
+    :returns: ``out_dir`` as a :class:`~pathlib.Path`.
+    """
+    import torch
+    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.monitor import Monitor
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    torch.set_num_threads(1)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    record: dict[str, Any] = {
+        "config": config.to_dict(),
+        "env_id": config.env_id,
+        "algo": config.algo,
+        "status": "running",
+        "versions": _versions(),
+        "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
+    atomic_write_text(out / "config.json", json.dumps(record, indent=2))
+
+    vec_cls = SubprocVecEnv if config.vec_env == "subproc" else DummyVecEnv
+    train_env = make_vec_env(
+        make_train_env,
+        n_envs=config.n_envs,
+        seed=config.seed,
+        vec_env_cls=vec_cls,
+        env_kwargs={
+            "env_id": config.env_id,
+            "env_kwargs": config.env_kwargs,
+            "shaping": config.shaping,
+            "gamma": config.gamma,
+            "body_frame": config.body_frame,
+            "turn_exponent": config.turn_exponent,
+        },
+    )
+    scenarios = validation_scenarios(config.n_eval_scenarios, random_scenario_kwargs(config.env_kwargs))
+    eval_env = DummyVecEnv(
+        [
+            lambda: Monitor(
+                make_eval_env(config.env_id, scenarios, config.env_kwargs, config.body_frame, config.turn_exponent)
+            )
+        ]
+    )
+
+    algo_cls = _algo_class(config.algo)
+    policy_kwargs: dict[str, Any] = {"net_arch": {"pi": list(config.net_arch), "vf": list(config.net_arch)}}
+    if config.algo == "continuous":
+        policy_kwargs["log_std_init"] = config.log_std_init
+    model = algo_cls(
+        "MlpPolicy",
+        train_env,
+        learning_rate=_linear_schedule(config.learning_rate, config.lr_final_fraction),
+        n_steps=config.n_steps,
+        batch_size=config.batch_size,
+        n_epochs=config.n_epochs,
+        gamma=config.gamma,
+        gae_lambda=config.gae_lambda,
+        clip_range=config.clip_range,
+        ent_coef=config.ent_coef,
+        vf_coef=config.vf_coef,
+        max_grad_norm=config.max_grad_norm,
+        policy_kwargs=policy_kwargs,
+        tensorboard_log=str(out / "tb") if config.tensorboard else None,
+        seed=config.seed,
+        device="cpu",
+        verbose=max(config.verbose, 0),
+    )
+    t_start = time.perf_counter()
+    eval_cb = _eval_callback(config, eval_env, out, t_start, 1)
+    callbacks: list[Any] = [eval_cb]
+    if config.checkpoint_freq:
+        callbacks.append(
+            CheckpointCallback(
+                save_freq=max(1, config.checkpoint_freq // config.n_envs),
+                save_path=str(out / "checkpoints"),
+                name_prefix=config.algo,
+            )
+        )
+    if config.max_minutes is not None:
+        callbacks.append(_wall_clock_callback(config.max_minutes, t_start))
+    progress = config.progress_bar
+    if progress:
+        try:
+            import rich  # noqa: F401
+            import tqdm  # noqa: F401
+        except ImportError:
+            print("tqdm/rich are not installed: training without a progress bar", file=sys.stderr)
+            progress = False
+    try:
+        model.learn(
+            total_timesteps=config.total_timesteps,
+            callback=CallbackList(callbacks),
+            progress_bar=progress,
+            tb_log_name=config.algo,
+        )
+    finally:
+        train_env.close()
+        eval_env.close()
+    wall = time.perf_counter() - t_start
+    model.save(str(out / "model.zip"))
+    record.update(
+        status="done",
+        finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        train_wall_s=round(wall, 1),
+        timesteps_done=int(model.num_timesteps),
+        steps_per_s=round(model.num_timesteps / max(wall, 1e-9), 1),
+        stopped_by_wall_clock=bool(config.max_minutes is not None and model.num_timesteps < config.total_timesteps),
+        final_eval=eval_cb.records[-1] if eval_cb.records else None,
+        best_eval=max(eval_cb.records, key=lambda r: r["mean_return"]) if eval_cb.records else None,
+    )
+    atomic_write_text(out / "config.json", json.dumps(record, indent=2))
+    if eval_cb.records:
+        title = f"{config.algo} on {config.env_id}"
+        try:
+            plot_learning_curve(out / "eval_log.json", out / "learning_curve.png", title=title)
+        except ImportError:  # matplotlib is in the "plot" extra, not in "ppo"
+            print("matplotlib is not installed: no learning_curve.png (pip install '.[plot]')", file=sys.stderr)
+    return out
+
+
+def plot_learning_curve(
+    eval_logs: str | Path | Sequence[str | Path], png: str | Path, title: str = "", labels: Sequence[str] | None = None
+) -> Path:
+    """Learning curve(s) from ``eval_log.json`` file(s), on the fixed validation scenarios: success
+    rate against timesteps and against wall-clock minutes, mean return, and the mean energy of the
+    successful episodes [kJ/kg]."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    paths = [eval_logs] if isinstance(eval_logs, (str, Path)) else list(eval_logs)
+    names = list(labels) if labels is not None else [Path(p).parent.name for p in paths]
+    fig, axes = plt.subplots(2, 2, figsize=(11, 7.5), constrained_layout=True)
+    (ax_s, ax_w), (ax_r, ax_e) = axes
+    for p, name in zip(paths, names, strict=True):
+        recs = json.loads(Path(p).read_text())
+        if not recs:
+            continue
+        ts = np.array([r["timesteps"] for r in recs])
+        wall = np.array([r["wall_s"] for r in recs]) / 60.0
+        succ = [100.0 * r["success_rate"] for r in recs]
+        energy = [np.nan if r["mean_energy_success"] is None else r["mean_energy_success"] / 1000 for r in recs]
+        (line,) = ax_s.plot(ts, succ, marker=".", label=name)
+        ax_w.plot(wall, succ, marker=".", color=line.get_color(), label=name)
+        ax_r.plot(ts, [r["mean_return"] for r in recs], marker=".", color=line.get_color(), label=name)
+        ax_e.plot(ts, energy, marker=".", color=line.get_color(), label=name)
+    ax_s.set_ylabel("validation success rate [%]")
+    ax_w.set_ylabel("validation success rate [%]")
+    ax_w.set_xlabel("wall-clock training time [min]")
+    ax_r.set_ylabel("validation mean return")
+    ax_e.set_ylabel("energy spent, successful episodes [kJ/kg]")
+    for ax in (ax_s, ax_r, ax_e):
+        ax.set_xlabel("timesteps")
+    for ax in (ax_s, ax_w):
+        ax.set_ylim(-2, 102)
+    for ax in axes.ravel():
+        ax.grid(alpha=0.3)
+        ax.legend(loc="best", fontsize=8)
+    if title:
+        fig.suptitle(title)
+    out = Path(png)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out

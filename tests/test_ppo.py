@@ -1,0 +1,154 @@
+"""PPO baselines: a tiny run trains, saves, loads and evaluates end to end; wrappers and config."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+pytest.importorskip("sb3_contrib")
+
+import soaring_env  # noqa: F401  (registers the envs)
+from baselines.agents import Agent, PPOAgent
+from baselines.evaluation import EvalConfig, resolve_scenario, run_evaluation
+from baselines.ppo import (
+    ALGOS,
+    DISCRETE_ID,
+    BodyFrameObservation,
+    GoalDistanceShaping,
+    ScenarioCycle,
+    TrainConfig,
+    body_frame,
+    plot_learning_curve,
+    train,
+    turn_curve,
+    validation_scenarios,
+)
+
+TIMING = {"compute_total_s", "compute_plan_s", "compute_per_decision_s"}
+
+
+def _tiny(algo: str) -> TrainConfig:
+    return TrainConfig(
+        algo=algo,
+        total_timesteps=1024,
+        n_envs=2,
+        n_steps=128,
+        batch_size=64,
+        n_epochs=2,
+        eval_freq=512,
+        n_eval_scenarios=3,
+        checkpoint_freq=512,
+        progress_bar=False,
+    )
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """One tiny run per algorithm (a few seconds each)."""
+    root = tmp_path_factory.mktemp("ppo")
+    return {algo: train(_tiny(algo), root / algo) for algo in ALGOS}
+
+
+@pytest.mark.parametrize("algo", list(ALGOS))
+def test_tiny_run_writes_the_run_directory(trained: dict[str, Path], algo: str) -> None:
+    out = trained[algo]
+    for name in ("model.zip", "best_model.zip", "config.json", "eval_log.json", "evaluations.npz"):
+        assert (out / name).is_file(), name
+    assert (out / "learning_curve.png").stat().st_size > 0
+    assert list((out / "checkpoints").glob("*.zip"))
+    rec = json.loads((out / "config.json").read_text())
+    assert rec["status"] == "done" and rec["algo"] == algo and rec["env_id"] == ALGOS[algo]
+    assert rec["timesteps_done"] >= 1024
+    # The saved configuration is exactly the one trained with.
+    assert TrainConfig.from_dict(rec["config"]) == _tiny(algo)
+    log = json.loads((out / "eval_log.json").read_text())
+    assert [r["timesteps"] for r in log] == [512, 1024]
+    assert all(0.0 <= r["success_rate"] <= 1.0 for r in log)
+
+
+@pytest.mark.parametrize("algo", list(ALGOS))
+def test_trained_agent_acts_through_the_agent_interface(trained: dict[str, Path], algo: str, tmp_path: Path) -> None:
+    agent = PPOAgent(trained[algo])
+    assert isinstance(agent, Agent) and agent.name == {"discrete": "ppo-discrete", "masked": "ppo-masked"}.get(
+        algo, "ppo-continuous"
+    )
+    env = gym.make(agent.env_id)
+    obs, _ = env.reset(seed=0, options={"scenario": resolve_scenario("paper")})
+    agent.reset(env, 0)
+    action, state = agent.predict(obs)
+    assert state is None and env.action_space.contains(action)
+    if algo == "masked":
+        assert env.unwrapped.action_masks()[int(action)]
+    # End to end through the evaluation, twice: deterministic for fixed seeds.
+    name = f"ppo-{algo}"
+    cfg = EvalConfig(agents=(name,), scenarios=("paper", "random-10000"), seeds=(0,), ppo_dirs={name: trained[algo]})
+    r1 = run_evaluation(cfg, tmp_path / "a", resume=False)
+    r2 = run_evaluation(cfg, tmp_path / "b", resume=False)
+    strip = [[{k: v for k, v in e.items() if k not in TIMING} for e in r["episodes"]] for r in (r1, r2)]
+    assert strip[0] == strip[1] and len(strip[0]) == 2
+    assert all(e["decisions"] >= 1 for e in r1["episodes"])
+
+
+def test_train_config_validation() -> None:
+    with pytest.raises(ValueError, match="algo='sac' is unknown; known: discrete, masked, continuous"):
+        TrainConfig(algo="sac")
+    with pytest.raises(ValueError, match="scenario"):
+        TrainConfig(env_kwargs={"scenario": "paper"})
+    with pytest.raises(ValueError, match="vec_env"):
+        TrainConfig(vec_env="ray")
+
+
+def test_goal_shaping_is_potential_based() -> None:
+    """With gamma = 1 the shaping telescopes to phi(s_T) - phi(s_0) = d_0 / scale on termination."""
+    env = GoalDistanceShaping(gym.make(DISCRETE_ID), weight=1.0, gamma=1.0)
+    env.reset(seed=0)
+    d0 = float(np.linalg.norm(env.unwrapped.scenario.start_state[[0, 1, 3]] - env.unwrapped.scenario.goal.centre))
+    total = 0.0
+    for _ in range(100):
+        _, _, terminated, truncated, info = env.step(2)  # straight and level, slow
+        total += info["shaping"]
+        if terminated or truncated:
+            break
+    assert terminated
+    assert total == pytest.approx(d0 / 1000.0)
+
+
+def test_scenario_cycle_and_validation_set() -> None:
+    scs = validation_scenarios(3)
+    assert [s.name for s in scs] == ["random-5000", "random-5001", "random-5002"]
+    env = ScenarioCycle(gym.make(DISCRETE_ID), scs)
+    seen = []
+    for _ in range(4):
+        env.reset()
+        seen.append(env.unwrapped.scenario.name)
+    assert seen == ["random-5000", "random-5001", "random-5002", "random-5000"]
+
+
+def test_learning_curve_of_several_runs(trained: dict[str, Path], tmp_path: Path) -> None:
+    logs = [trained[a] / "eval_log.json" for a in ALGOS]
+    png = plot_learning_curve(logs, tmp_path / "curve.png", labels=list(ALGOS))
+    assert png.stat().st_size > 0
+
+
+def test_body_frame_rotates_into_the_aircraft_frame() -> None:
+    env = BodyFrameObservation(gym.make(DISCRETE_ID))
+    sc = resolve_scenario("paper").replace(start=(0.0, 0.0, np.pi / 2, 300.0))  # heading east, goal north
+    obs, _ = env.reset(seed=0, options={"scenario": sc})
+    assert env.observation_space.contains(obs)
+    ahead, right = obs[0], obs[1]
+    assert ahead == pytest.approx(0.0, abs=1e-6) and right == pytest.approx(-3.0, abs=1e-6)  # goal on the left
+    dist, sin_err, cos_err = obs[-3:]
+    assert dist == pytest.approx(3.0) and sin_err == pytest.approx(-1.0) and cos_err == pytest.approx(0.0, abs=1e-6)
+    batch = body_frame(np.zeros((2, obs.shape[0] - 3), dtype=np.float32) + np.float32(0.5))
+    assert batch.shape == (2, obs.shape[0])
+
+
+def test_turn_curve_keeps_the_envelope_and_refines_small_turns() -> None:
+    a = turn_curve(np.array([0.2, 0.5, -0.3], dtype=np.float32), 3.0)
+    assert a[0] == pytest.approx(0.2) and a[2] == pytest.approx(-0.3) and a[1] == pytest.approx(0.125)
+    assert turn_curve(np.array([0.0, -1.0, 1.0]), 3.0)[1] == -1.0
