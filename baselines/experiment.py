@@ -272,9 +272,13 @@ def format_table(summary: dict[str, dict[str, Any]], time_limit: float) -> str:
         f"| failures (no solution in {time_limit:g} s) | {pp['failures']}/{pp['runs']} | {pc['failures']}/{pc['runs']} "
         f"| {ours(prim, 'failures')} | {ours(cont, 'failures')} |"
     )
-    it_ratio = ""
-    if prim and cont and cont["iterations"][0] > 0:
-        it_ratio = f" (primitive/continuous = {prim['iterations'][0] / cont['iterations'][0]:.2f})"
+
+    def ratio(key: str) -> str:
+        if prim and cont and cont[key][0] > 0:
+            return f" (primitive/continuous = {prim[key][0] / cont[key][0]:.2f})"
+        return ""
+
+    it_ratio = ratio("iterations")
     rows.append(
         f"| iterations per {time_limit:g} s | fig. 3; primitive 11% more | fig. 3 "
         f"| {ours(prim, 'iterations')} | {ours(cont, 'iterations')}{it_ratio} |"
@@ -287,9 +291,7 @@ def format_table(summary: dict[str, dict[str, Any]], time_limit: float) -> str:
         f"| {pc['cost_mean']:.3g} ± {pc['cost_std']:.3g} | {ours(prim, 'cost')} "
         f"| {ours(cont, 'cost')} |"
     )
-    ft_ratio = ""
-    if prim and cont and cont["flight_time"][0] > 0:
-        ft_ratio = f" (primitive/continuous = {prim['flight_time'][0] / cont['flight_time'][0]:.2f})"
+    ft_ratio = ratio("flight_time")
     rows.append(
         f"| flight time [s] | fig. 5; about half of continuous | fig. 5 | {ours(prim, 'flight_time')} "
         f"| {ours(cont, 'flight_time')}{ft_ratio} |"
