@@ -24,7 +24,7 @@ from soaring_env._jit import FASTMATH as _FM
 from soaring_env._validation import ConfigError, check_array_finite, check_int, check_positive
 from soaring_env.physics.aircraft import _AC_ETA, _AC_MASS, _AC_MODEL, Aircraft, _thrust_at, _thrust_coeffs
 from soaring_env.physics.atmosphere import LAPSE, T0, G, _density, _density_near
-from soaring_env.physics.thermals import _GAUSSIAN, GAUSSIAN_CUTOFF, WindField, allen_reach, updraft_at
+from soaring_env.physics.thermals import _GAUSSIAN, GAUSSIAN_CUTOFF, WindField, updraft_at, within_allen_reach
 
 FAMILIES = ("straight", "curve", "spiral", "spline")
 STRAIGHT, CURVE, SPIRAL, SPLINE = range(4)
@@ -39,7 +39,7 @@ N_PRIMITIVES = 174
 MAX_HEIGHT = 11000.0
 
 #: Default largest integration substep near thermals [s]; a 10x finer step moves the height after a
-#: primitive through a thermal core by < 2 mm (tests). Across discontinuities of the field (the
+#: primitive through a thermal core by < 1 cm (tests; 8.4 mm in the worst tested case). Across discontinuities of the field (the
 #: updraft cut at zi, the nearest-thermal boundary between overlapping Allen thermals) fixed steps
 #: are first order: the error there is at most about the jump times one substep.
 DEFAULT_MAX_SUBSTEP = 0.5
@@ -208,7 +208,7 @@ def rollout(
                 f"primitive={primitive!r} is invalid; allowed: an integer or 1-D integer array in 0..{N_PRIMITIVES - 1}"
             )
         b = _batch(x.shape[0], idx.size if idx.ndim else 1, "primitive")
-        ctrl = lib.kernel_rows[np.broadcast_to(idx, (b,))]
+        ctrl = np.take(lib.kernel_rows, np.broadcast_to(idx, (b,)), axis=0)  # 5x faster than [idx]
     else:
         u = np.asarray(control, dtype=np.float64)
         if u.ndim == 1:
@@ -418,17 +418,16 @@ def _rollout_kernel(
                 lim = infl[j] + reach
                 d2 = dx * dx + dy * dy
                 if d2 < lim * lim:
-                    if model == _GAUSSIAN:
-                        near = True
-                        break
                     # Allen: refine with 2 r2 at the highest height this interval can reach.
-                    lim = allen_reach(h + (abs(climb) + w_bound) * dt, zi) + reach
-                    if d2 < lim * lim:
+                    if model == _GAUSSIAN or within_allen_reach(
+                        math.sqrt(d2) - reach, h + (abs(climb) + w_bound) * dt, zi
+                    ):
                         near = True
                         break
             if near:
-                # Simpson's rule on each substep; the rates at the mid and end points use predicted
-                # heights (the updraft depends on h only weakly), and the end rate is reused as the
+                # Simpson's rule on each substep. The rates at the mid and end points use heights
+                # predicted from the start rate (the updraft depends on h only weakly), so the two
+                # evaluations are independent and overlap in the CPU; the end rate is reused as the
                 # next substep's start rate: two updraft evaluations per substep.
                 pn, pe, pc, ps = n, e, c, s
                 hh = h
@@ -439,7 +438,7 @@ def _rollout_kernel(
                     pn, pe, pc, ps = _advance(pn, pe, pc, ps, u, om, 0.5 * hs, ch, sh, wn, we)
                     gm = climb + updraft_at(pn, pe, hh + 0.5 * hs * g0, ts + 0.5 * hs, th, model, zi, dvx, dvy)
                     pn, pe, pc, ps = _advance(pn, pe, pc, ps, u, om, 0.5 * hs, ch, sh, wn, we)
-                    ge = climb + updraft_at(pn, pe, hh + hs * gm, ts + hs, th, model, zi, dvx, dvy)
+                    ge = climb + updraft_at(pn, pe, hh + hs * g0, ts + hs, th, model, zi, dvx, dvy)
                     hh += hs / 6.0 * (g0 + 4.0 * gm + ge)
                     g0 = ge
                 g0_ok = True

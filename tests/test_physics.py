@@ -9,6 +9,8 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
 from soaring_env import (
     Aircraft,
@@ -21,6 +23,7 @@ from soaring_env import (
     bank_angle,
     rollout,
 )
+from soaring_env.physics.thermals import ALLEN_SHAPE, _pow, allen_reach, within_allen_reach
 
 FindPrimitive = Callable[[PrimitiveLibrary, str, float, float, float], int]
 
@@ -529,3 +532,28 @@ def test_config_error_is_value_error() -> None:
     assert issubclass(ConfigError, ValueError)
     with pytest.raises(ValueError):
         Aircraft(mass=-1.0)
+
+
+@settings(deadline=None)
+@given(
+    d=st.floats(0.0, 400.0),
+    z=st.floats(-100.0, 3000.0),
+    zi=st.floats(200.0, 2500.0),
+)
+def test_within_allen_reach_is_the_cube_root_free_reach_test(d: float, z: float, zi: float) -> None:
+    """The rollout's cube-root-free test decides ``d < 2 r2(z)`` exactly as the closed form does
+    (away from a rounding-width band at the boundary), and 2 r2 bounds the updraft's support."""
+    reach = allen_reach(z, zi)
+    assume(abs(d - reach) > 1e-9 * reach)
+    assert within_allen_reach(d, z, zi) == (d < reach)
+    if d > reach * (1.0 + 1e-9) and z < zi:
+        assert float(WindField(thermals=(Thermal(0.0, 0.0, 3.0),), zi=zi).updraft(d, 0.0, z)) == 0.0
+
+
+@given(x=st.floats(1e-12, 1e3), y=st.sampled_from([1.0 / 3.0, *ALLEN_SHAPE[:, 2]]))
+def test_fast_pow_matches_pow(x: float, y: float) -> None:
+    """exp(y log x) stands in for libm's pow in the updraft: relative error ~ |y ln x| 2^-53."""
+    exact = x**y
+    assume(1e-300 < exact < 1e300)
+    assert _pow(x, y) == pytest.approx(exact, rel=4.0 * max(1.0, abs(y * math.log(x))) * 2.0**-53)
+    assert _pow(0.0, y) == 0.0
