@@ -33,6 +33,7 @@ os.environ["NUMBA_NUM_THREADS"] = "1"  # before numba is imported
 import argparse
 import math
 import platform
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -173,7 +174,7 @@ def print_table(title: str, header: list[str], rows: list[list[str]]) -> None:
         table.add_column(h, justify="left" if i < 3 else "right")
     for r in rows:
         table.add_row(*r)
-    Console().print(table)
+    Console(width=None if sys.stdout.isatty() else 120).print(table)  # no wrapping in logs
 
 
 def main(argv: list[str] | None = None) -> int:
