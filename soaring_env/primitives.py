@@ -15,6 +15,7 @@ updraft is exactly zero and the height is linear in time).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -39,9 +40,10 @@ N_PRIMITIVES = 174
 MAX_HEIGHT = 11000.0
 
 #: Default largest integration substep near thermals [s]; a 10x finer step moves the height after a
-#: primitive through a thermal core by < 1 cm (tests; 8.4 mm in the worst tested case). Across discontinuities of the field (the
-#: updraft cut at zi, the nearest-thermal boundary between overlapping Allen thermals) fixed steps
-#: are first order: the error there is at most about the jump times one substep.
+#: primitive through a thermal core by < 1 cm (tests; 8.4 mm in the worst tested case). Across
+#: discontinuities of the field (the updraft cut at zi, the nearest-thermal boundary between
+#: overlapping Allen thermals) fixed steps are first order: the error there is at most about the
+#: jump times one substep.
 DEFAULT_MAX_SUBSTEP = 0.5
 
 # Columns of PrimitiveLibrary.table.
@@ -267,6 +269,8 @@ class Propagator:
     ``ctrl`` (B, 4) kernel rows ``(v_a [m/s], gamma [rad], chi_dot_1, chi_dot_2 [rad/s])`` (see
     :attr:`PrimitiveLibrary.kernel_rows`). It returns ``states`` (B, N, 4) and ``terms`` (B, 6) =
     (fuel, potential, kinetic, cost [J/kg], max bank [rad], min height [m]).
+
+    :meth:`run_fields` rolls each row out in a field of its own (many scenarios in one call).
     """
 
     def __init__(
@@ -283,27 +287,62 @@ class Propagator:
         self.duration = lib.duration if duration is None else duration
         self.ctrl_table = lib.kernel_rows
         self.ctrl_rows = lib.kernel_row
-        dvx, dvy = (field.wind_north, field.wind_east) if field.drift else (0.0, 0.0)
         self._pre = (self.duration, lib.n_points, lib.n_points // 2, max_substep)
-        self._post = (
-            field.packed,
-            field.model_code,
-            field.zi,
-            field.wind_north,
-            field.wind_east,
-            dvx,
-            dvy,
-            aircraft.packed(),
-        )
+        self._field = pack_fields([field])
+        self._ac = aircraft.packed()
 
     def run(
         self, x0: np.ndarray, t0: np.ndarray, v_prev: np.ndarray, ctrl: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
+        return self.run_fields(x0, t0, v_prev, ctrl, _NO_FIELD_INDEX, *self._field)
+
+    def run_fields(
+        self,
+        x0: np.ndarray,
+        t0: np.ndarray,
+        v_prev: np.ndarray,
+        ctrl: np.ndarray,
+        field_index: np.ndarray,
+        thermals: np.ndarray,
+        n_thermals: np.ndarray,
+        params: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`run` with row b in field ``field_index[b]`` (int64, (B,); empty: field 0 for all) of a
+        packed table of F fields: ``thermals`` (F, n_max, 4) rows of :attr:`WindField.packed` (the
+        first ``n_thermals[f]`` used), ``params`` (F, 6) rows of :func:`field_params`. No validation:
+        every index must be < F. The aircraft, library and substep are this propagator's."""
         b = x0.shape[0]
         out = np.empty((b, self.n_points, 4))
         terms = np.empty((b, 6))
-        _rollout_kernel(x0, t0, ctrl, v_prev, *self._pre, *self._post, out, terms)
+        _rollout_kernel(
+            x0, t0, ctrl, v_prev, field_index, *self._pre, thermals, n_thermals, params, self._ac, out, terms
+        )
         return out, terms
+
+
+#: Columns of :func:`field_params`.
+FP_WIND_NORTH, FP_WIND_EAST, FP_ZI, FP_MODEL, FP_DRIFT_NORTH, FP_DRIFT_EAST = range(6)
+_NO_FIELD_INDEX = np.empty(0, dtype=np.int64)
+
+
+def pack_fields(fields: Sequence[WindField]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Wind fields as the table :meth:`Propagator.run_fields` reads: ``thermals`` (F, n_max, 4)
+    (row f starts with ``fields[f].packed``, zero-padded), ``n_thermals`` (F,) int64 and ``params``
+    (F, 6) rows of :func:`field_params`; all fresh writable arrays (the kernel's one specialization)."""
+    if len(fields) == 0:
+        raise ConfigError("pack_fields needs at least one WindField")
+    n = np.array([len(f.thermals) for f in fields], dtype=np.int64)
+    thermals = np.zeros((len(fields), max(1, int(n.max())), 4))
+    for i, f in enumerate(fields):
+        thermals[i, : n[i]] = f.packed
+    return thermals, n, np.stack([field_params(f) for f in fields])
+
+
+def field_params(field: WindField) -> np.ndarray:
+    """The field's scalars as the (6,) float64 row the kernels read: ambient wind north, east [m/s],
+    zi [m], model code, thermal drift velocity north, east [m/s] (zero unless ``drift``)."""
+    dvx, dvy = (field.wind_north, field.wind_east) if field.drift else (0.0, 0.0)
+    return np.array([field.wind_north, field.wind_east, field.zi, float(field.model_code), dvx, dvy])
 
 
 def _batch(n_states: int, n_controls: int, what: str) -> int:
@@ -342,23 +381,37 @@ def _advance(n, e, c, s, u, om, tau, cd, sd, wn, we):
 
 @njit(cache=True, fastmath=_FM)
 def _rollout_kernel(
-    x0, t0, ctrl, v_prev, dur, n_pts, k_switch, max_substep, th, model, zi, wn, we, dvx, dvy, ac, out, terms
+    x0, t0, ctrl, v_prev, fidx, dur, n_pts, k_switch, max_substep, th_all, nth_all, fpar, ac, out, terms
 ):
-    nth = th.shape[0]
     dt = dur / n_pts
     m_sub = max(1, int(math.ceil(dt / max_substep - 1e-9)))
     hs = dt / m_sub
-    wind = math.sqrt(wn * wn + we * we)
     mass_eta = ac[_AC_MASS] * ac[_AC_ETA]
     tmodel = ac[_AC_MODEL]
     two_pi = 2.0 * math.pi
-    infl = np.empty(nth)
-    cand = np.empty(nth, dtype=np.int64)
-    w_bound = 0.0  # |updraft| <= 1.2 w* (Allen's peak/w* stays below 1.1)
-    for j in range(nth):
-        w_bound = max(w_bound, 1.2 * th[j, 2])
-        infl[j] = GAUSSIAN_CUTOFF * th[j, 3] if model == _GAUSSIAN else th[j, 3]
+    infl = np.empty(th_all.shape[1])
+    cand = np.empty(th_all.shape[1], dtype=np.int64)
+    fld_prev = -1
+    th = th_all[0, :0]
+    nth = model = 0
+    zi = wn = we = dvx = dvy = wind = w_bound = 0.0
     for b in range(x0.shape[0]):
+        fld = fidx[b] if fidx.size > 0 else 0
+        if fld != fld_prev:  # this row's field: unpack once per run of rows that share it
+            fld_prev = fld
+            nth = nth_all[fld]
+            th = th_all[fld, :nth]
+            wn = fpar[fld, FP_WIND_NORTH]
+            we = fpar[fld, FP_WIND_EAST]
+            zi = fpar[fld, FP_ZI]
+            model = int(fpar[fld, FP_MODEL])
+            dvx = fpar[fld, FP_DRIFT_NORTH]
+            dvy = fpar[fld, FP_DRIFT_EAST]
+            wind = math.sqrt(wn * wn + we * we)
+            w_bound = 0.0  # |updraft| <= 1.2 w* (Allen's peak/w* stays below 1.1)
+            for j in range(nth):
+                w_bound = max(w_bound, 1.2 * th[j, 2])
+                infl[j] = GAUSSIAN_CUTOFF * th[j, 3] if model == _GAUSSIAN else th[j, 3]
         v = ctrl[b, 0]
         gam = ctrl[b, 1]
         u = v * math.cos(gam)

@@ -42,6 +42,7 @@ from numba import njit
 
 from soaring_env.model import N_CLASSIFY_PARAMS, classify_params
 from soaring_env.physics.thermals import _GAUSSIAN, _r1_over_r2, updraft_at
+from soaring_env.primitives import FP_DRIFT_EAST, FP_WIND_NORTH, field_params
 from soaring_env.scenario import Scenario
 
 BASE_FEATURES = (
@@ -70,7 +71,7 @@ N_THERMAL_FEATURES = len(THERMAL_FEATURES)
 # Columns of the per-env scenario parameter rows (see :func:`scenario_params`).
 (P_GN, P_GE, P_GH, P_GR, P_NMIN, P_NMAX, P_EMIN, P_EMAX, P_HMAX, P_WN, P_WE, P_ZI, P_MODEL, P_DVX, P_DVY) = range(15)
 N_PARAMS = 15
-assert P_WN == N_CLASSIFY_PARAMS
+assert (P_WN, P_DVY) == (N_CLASSIFY_PARAMS + FP_WIND_NORTH, N_CLASSIFY_PARAMS + FP_DRIFT_EAST)  # field_params
 
 
 def observation_layout(observe_thermals: bool, n_thermals: int) -> tuple[list[str], np.ndarray, np.ndarray]:
@@ -88,17 +89,7 @@ def observation_layout(observe_thermals: bool, n_thermals: int) -> tuple[list[st
 def scenario_params(sc: Scenario) -> np.ndarray:
     """The scenario as the (N_PARAMS,) float64 row read by the compiled env kernels; it starts
     with :func:`soaring_env.model.classify_params` (goal and domain)."""
-    f = sc.field
-    drift = bool(f.drift)
-    extra = [
-        f.wind_north,
-        f.wind_east,
-        f.zi,
-        float(f.model_code),
-        f.wind_north if drift else 0.0,
-        f.wind_east if drift else 0.0,
-    ]
-    return np.concatenate([classify_params(sc), extra])
+    return np.concatenate([classify_params(sc), field_params(sc.field)])
 
 
 @njit(cache=True, inline="always")

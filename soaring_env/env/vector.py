@@ -13,9 +13,8 @@ resets in the same step and puts the last observation and info into ``info["fina
 ``info["final_info"]``. Truncation: after ``max_episode_steps`` steps (the registered 40), as
 ``TimeLimit`` does for a single env.
 
-Envs that share one scenario (the default ``"paper"`` mode, or a pinned one) are rolled out in a
-single kernel call; in ``"random"`` mode every env has its own thermal field and the kernel is
-called once per distinct scenario (slower: the kernel takes one field per call).
+One kernel call rolls out every env's edge, each in its own scenario's thermal field (the kernel
+reads a per-env table of fields), so ``"random"`` scenarios cost no more than a shared one.
 """
 
 from __future__ import annotations
@@ -42,7 +41,7 @@ from soaring_env.env.config import SoaringEnvConfig, choose_scenario
 from soaring_env.env.core import SoaringBaseEnv, SoaringContinuousEnv, SoaringEnv
 from soaring_env.env.observation import N_PARAMS, observe_batch, scenario_params
 from soaring_env.model import OUTCOMES, SoaringModel
-from soaring_env.primitives import N_PRIMITIVES, Propagator
+from soaring_env.primitives import N_PRIMITIVES, field_params
 from soaring_env.scenario import Scenario
 
 _OUTCOMES_OBJ = np.array(OUTCOMES, dtype=object)
@@ -127,13 +126,15 @@ class _SoaringVectorBase(VectorEnv):
         self._prm = np.zeros((b, N_PARAMS))
         self._th = np.zeros((b, 1, 4))
         self._nth = np.zeros(b, dtype=np.int64)
+        #: per-env field scalars for the kernel (rows of field_params); env i's field is row i
+        self._fpar = np.zeros((b, 6))
+        self._env_index = np.arange(b, dtype=np.int64)
         self._seeds: list[int | None] = [None] * b
         self._rngs: list[np.random.Generator | None] = [None] * b
         self.scenarios: list[Scenario] = [tmpl.scenario] * b
         self.models: list[SoaringModel] = [tmpl.model] * b
         #: model per scenario in use, by id(scenario); the model keeps the scenario alive
         self._models: dict[int, SoaringModel] = {id(tmpl.scenario): tmpl.model}
-        self._groups: list[tuple[Propagator, np.ndarray]] | None = None
         self._bank_ok = tmpl.model.bank_ok()
         self._lo, hi = tmpl.library.control_bounds()
         self._span = hi - self._lo
@@ -162,9 +163,6 @@ class _SoaringVectorBase(VectorEnv):
             self._models[id(sc)] = model
         return model
 
-    def _props(self, key: int) -> Propagator:
-        return self._models[key].propagator
-
     def _reset_rows(self, rows: np.ndarray, options: dict[str, Any] | None, obs: np.ndarray) -> None:
         """Start new episodes in envs ``rows`` and write their observations into ``obs``."""
         t = self.template
@@ -174,7 +172,6 @@ class _SoaringVectorBase(VectorEnv):
             chosen = [fixed]
             groups: list[tuple[Scenario, np.ndarray]] = [(fixed, rows)]
             if any(self.scenarios[i] is not fixed for i in row_list):
-                self._groups = None
                 self._model(fixed)
                 for i in row_list:
                     self.scenarios[i] = fixed
@@ -187,7 +184,6 @@ class _SoaringVectorBase(VectorEnv):
             by_sc: dict[int, list[int]] = {}
             for i, sc in zip(row_list, chosen, strict=True):
                 if self.scenarios[i] is not sc:
-                    self._groups = None
                     self.scenarios[i] = sc
                     self.models[i] = self._model(sc)
                 by_sc.setdefault(id(sc), []).append(i)
@@ -200,6 +196,7 @@ class _SoaringVectorBase(VectorEnv):
         for sc, idx in groups:
             n = len(sc.field.thermals)
             self._prm[idx] = scenario_params(sc)
+            self._fpar[idx] = field_params(sc.field)
             self._th[idx, :n] = sc.field.packed
             self._nth[idx] = n
             self.states[idx] = sc.start_state
@@ -303,7 +300,7 @@ class _SoaringVectorBase(VectorEnv):
         self._reset_info(rows, infos)
         return obs.copy(), infos
 
-    def _controls(self, actions: Any) -> tuple[np.ndarray, np.ndarray | None]:
+    def _controls(self, actions: Any) -> np.ndarray:
         b = self.num_envs
         a = np.asarray(actions)
         if self.continuous:
@@ -316,7 +313,7 @@ class _SoaringVectorBase(VectorEnv):
             if not (np.all(a64 >= -1.0) and np.all(a64 <= 1.0)):
                 raise ConfigError("actions contain values outside [-1, 1] or non-finite values; allowed: [-1, 1]")
             u = self._lo + 0.5 * (a64 + 1.0) * self._span
-            return np.ascontiguousarray(u[:, [0, 2, 1, 1]]), None
+            return np.ascontiguousarray(u[:, [0, 2, 1, 1]])
         if a.shape != (b,) or a.dtype.kind not in "iu":
             raise ConfigError(
                 f"actions={a!r} have shape {a.shape} and dtype {a.dtype}; allowed: integers of shape ({b},) "
@@ -324,44 +321,24 @@ class _SoaringVectorBase(VectorEnv):
             )
         if a.size and (a.min() < 0 or a.max() >= N_PRIMITIVES):
             raise ConfigError(f"actions contain indices outside 0..{N_PRIMITIVES - 1}")
-        return self.template._prop.ctrl_table[a], a
+        return np.take(self.template._prop.ctrl_table, a, axis=0)
 
     def _rollout(
-        self, x0: np.ndarray, t0: np.ndarray, vp: np.ndarray, ctrl: np.ndarray, prim: np.ndarray | None
+        self, x0: np.ndarray, t0: np.ndarray, vp: np.ndarray, ctrl: np.ndarray, env: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Roll out edge b from ``x0[b]`` for every b: one kernel call per distinct scenario."""
-        groups = self._groups
-        if groups is None:
-            by: dict[int, list[int]] = {}
-            for i, sc in enumerate(self.scenarios):
-                by.setdefault(id(sc), []).append(i)
-            groups = [(self._props(k), np.array(v)) for k, v in by.items()]
-            self._groups = groups
-        if len(groups) == 1:
-            return groups[0][0].run(x0, t0, vp, ctrl)
-        n = x0.shape[0]
-        out = np.empty((n, self._n_pts, 4))
-        terms = np.empty((n, 6))
-        for prop, idx in groups:
-            o, tm = prop.run(
-                np.ascontiguousarray(x0[idx]),
-                t0[idx],
-                vp[idx],
-                np.ascontiguousarray(ctrl[idx]),
-            )
-            out[idx] = o
-            terms[idx] = tm
-        return out, terms
+        """Roll out edge b from ``x0[b]`` in the field of env ``env[b]``, for every b: one kernel call."""
+        prop = self.template._prop  # same aircraft, library and substep for every env
+        return prop.run_fields(x0, t0, vp, ctrl, env, self._th, self._nth, self._fpar)
 
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Step all envs; see the module docstring for the autoreset modes."""
         if self._needs_reset:
             raise RuntimeError("step() called before reset(); call reset() first")
-        ctrl, prim = self._controls(actions)
+        ctrl = self._controls(actions)
         t = self.template
         b = self.num_envs
         autoreset = self._prev_done.copy() if self.autoreset_mode == AutoresetMode.NEXT_STEP else None
-        out, terms = self._rollout(self.states, self.times, self.airspeed_prev, ctrl, prim)
+        out, terms = self._rollout(self.states, self.times, self.airspeed_prev, ctrl, self._env_index)
         t_new = self.times + t._ts
         obs = np.empty((b, self._n_obs), dtype=np.float32)
         new_states = np.empty((b, 4))
@@ -470,17 +447,8 @@ class SoaringVectorEnv(_SoaringVectorBase):
         x0 = np.repeat(self.states, p, axis=0)
         t0 = np.repeat(self.times, p)
         vp = np.repeat(self.airspeed_prev, p)
-        prim = np.tile(np.arange(p), b)
-        ctrl = self.template._prop.ctrl_table[prim]
-        saved = self._groups
-        by: dict[int, list[int]] = {}
-        for i, sc in enumerate(self.scenarios):
-            by.setdefault(id(sc), []).extend(range(i * p, (i + 1) * p))
-        self._groups = [(self._props(k), np.array(v)) for k, v in by.items()]
-        try:
-            out, _ = self._rollout(x0, t0, vp, ctrl, prim)
-        finally:
-            self._groups = saved
+        ctrl = np.tile(self.template._prop.ctrl_table, (b, 1))
+        out, _ = self._rollout(x0, t0, vp, ctrl, np.repeat(self._env_index, p))
         codes = np.empty(b * p, dtype=np.int64)
         ks = np.empty(b * p, dtype=np.int64)
         classify_batch(out, np.repeat(self._prm, p, axis=0), codes, ks)
