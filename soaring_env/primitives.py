@@ -14,6 +14,7 @@ updraft is exactly zero and the height is linear in time).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -288,7 +289,7 @@ class Propagator:
         self.ctrl_table = lib.kernel_rows
         self.ctrl_rows = lib.kernel_row
         self._pre = (self.duration, lib.n_points, lib.n_points // 2, max_substep)
-        self._field = pack_fields([field])
+        self._field = _field_table(field)
         self._ac = aircraft.packed()
 
     def run(
@@ -336,6 +337,13 @@ def pack_fields(fields: Sequence[WindField]) -> tuple[np.ndarray, np.ndarray, np
     for i, f in enumerate(fields):
         thermals[i, : n[i]] = f.packed
     return thermals, n, np.stack([field_params(f) for f in fields])
+
+
+@functools.lru_cache(maxsize=256)
+def _field_table(field: WindField) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``pack_fields([field])``, kept: every validated :func:`rollout` call builds a Propagator, and
+    packing costs as much as a batch-1 rollout (WindField is frozen and hashable; never written)."""
+    return pack_fields([field])
 
 
 def field_params(field: WindField) -> np.ndarray:
