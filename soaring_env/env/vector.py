@@ -39,9 +39,9 @@ from soaring_env.env._kernels import (
 )
 from soaring_env.env.config import SoaringEnvConfig, choose_scenario
 from soaring_env.env.core import SoaringBaseEnv, SoaringContinuousEnv, SoaringEnv
-from soaring_env.env.observation import N_PARAMS, observe_batch, scenario_params
+from soaring_env.env.observation import N_PARAMS, P_WN, observe_batch, scenario_params
 from soaring_env.model import OUTCOMES, SoaringModel
-from soaring_env.primitives import N_PRIMITIVES, field_params
+from soaring_env.primitives import N_PRIMITIVES
 from soaring_env.scenario import Scenario
 
 _OUTCOMES_OBJ = np.array(OUTCOMES, dtype=object)
@@ -127,7 +127,7 @@ class _SoaringVectorBase(VectorEnv):
         self._th = np.zeros((b, 1, 4))
         self._nth = np.zeros(b, dtype=np.int64)
         #: per-env field scalars for the kernel (rows of field_params); env i's field is row i
-        self._fpar = np.zeros((b, 6))
+        self._fpar = np.zeros((b, N_PARAMS - P_WN))
         self._env_index = np.arange(b, dtype=np.int64)
         self._seeds: list[int | None] = [None] * b
         self._rngs: list[np.random.Generator | None] = [None] * b
@@ -196,7 +196,7 @@ class _SoaringVectorBase(VectorEnv):
         for sc, idx in groups:
             n = len(sc.field.thermals)
             self._prm[idx] = scenario_params(sc)
-            self._fpar[idx] = field_params(sc.field)
+            self._fpar[idx] = self._prm[idx, P_WN:]  # the field_params tail of scenario_params
             self._th[idx, :n] = sc.field.packed
             self._nth[idx] = n
             self.states[idx] = sc.start_state
