@@ -1,0 +1,59 @@
+"""Bounds and regret: the arithmetic of the optimality yardstick (see :mod:`baselines.reference`).
+
+* ``lower_bound`` -- a cost no plan can beat [J/kg]. Edge cost = fuel + kinetic - g dh with
+  fuel, kinetic >= 0, so the height terms telescope: J >= -g (h_end - h_start). A plan ends with the
+  edge that enters the goal region; the env charges that edge to its end (Ts), after its first
+  point inside the region, so h_end <= goal top + w_max (Ts - Ts/N), where w_max bounds the updraft
+  of any thermal that can reach the goal region (powered climbing never lowers the cost: it pays
+  at least g dh / eta >= g dh in fuel). Without such a thermal the bound is -g (goal top - h_start).
+* Regret ``r = (J - J_best) / (J_direct - J_best)``: 0 = as good as the best known plan, 1 = no
+  better than ignoring the thermals, > 1 worse, < 0 better than the reference (the search is not
+  exact). Where ``J_direct - J_best`` is below :data:`MIN_GAP` the thermals offer (almost) nothing
+  and r is undefined (NaN); report the absolute cost there. "Thermal benefit captured" is ``1 - r``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+from soaring_env.model import SoaringModel
+from soaring_env.physics.atmosphere import G
+
+#: Below this gap between the direct and the best cost [J/kg] (2.5 m of height) regret is undefined.
+MIN_GAP = 25.0
+def height_cap(model: SoaringModel) -> float:
+    """Highest height [m] a plan can end at, for the bound (module docstring)."""
+    sc = model.scenario
+    g = sc.goal
+    f = sc.field
+    top = g.height + g.radius
+    if not f.thermals:
+        return min(top, sc.bounds.height_max)
+    lib = model.library
+    reach = (float(model.control_high[0]) + math.hypot(f.wind_north, f.wind_east)) * lib.duration
+    infl = f.influence_radius()
+    w_max = 0.0
+    for t, r in zip(f.thermals, infl, strict=True):
+        near = f.drift or math.hypot(t.north - g.north, t.east - g.east) <= g.radius + reach + r
+        if near:
+            w_max = max(w_max, 1.2 * t.strength)  # |updraft| <= 1.2 w* (as in the rollout kernel)
+    return min(top + w_max * (lib.duration - lib.duration / lib.n_points), sc.bounds.height_max)
+
+
+def lower_bound(model: SoaringModel) -> float:
+    """The hard lower bound on the cost of any plan [J/kg] (module docstring)."""
+    return -G * (height_cap(model) - model.scenario.start[3])
+
+
+def without_thermals(model: SoaringModel) -> SoaringModel:
+    """The same model in the same wind with every thermal removed."""
+    sc = model.scenario
+    return dataclasses.replace(model, scenario=sc.replace(field=dataclasses.replace(sc.field, thermals=())))
+
+
+def regret(cost: float, best: float, direct: float) -> float:
+    """``(cost - best) / (direct - best)``; NaN if a value is missing or the gap is below MIN_GAP."""
+    if not (math.isfinite(cost) and math.isfinite(best) and math.isfinite(direct)) or direct - best < MIN_GAP:
+        return math.nan
+    return (cost - best) / (direct - best)

@@ -1,0 +1,196 @@
+"""The optimality yardstick: bounds, the direct-flight baseline, the reference per scenario, regret.
+
+Per scenario and action set (``"primitive"``: the 174 primitives; ``"continuous"``: the Box envs):
+
+* ``lower_bound`` -- a cost no plan can beat [J/kg] (:func:`~baselines.reference.bounds.lower_bound`).
+* ``direct_cost`` -- the cost of the best plan the reference search finds in the same wind with
+  the thermals removed ("ignoring the thermals").
+* ``best_cost`` -- the best plan known in the real field: the reference search seeded with the
+  direct plan (so it never does worse than flying that plan through the thermals).
+
+Regret: :func:`~baselines.reference.bounds.regret` against ``best_cost`` and ``direct_cost``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from baselines.reference.bounds import MIN_GAP, lower_bound, regret, without_thermals
+from baselines.reference.search import ReferenceConfig, SearchResult, search
+from baselines.sst.soaring import SAMPLERS
+from soaring_env._validation import ConfigError, check_choice
+from soaring_env.model import SoaringModel
+from soaring_env.scenario import Scenario, atomic_write_text
+
+#: Version of the reference file layout.
+SCHEMA = 1
+
+
+@dataclass(frozen=True)
+class SamplerReference:
+    """The reference of one action set in one scenario.
+
+    :param best_cost: best known plan cost [J/kg] (inf: none found).
+    :param direct_cost: best plan cost with the thermals removed [J/kg] (inf: none found).
+    :param actions: env actions of the best plan (ints, or lists of 3 floats).
+    :param direct_actions: env actions of the direct plan.
+    :param flight_time: flight time of the best plan [s].
+    :param settings: the search settings (:meth:`ReferenceConfig.to_dict`).
+    :param rollouts: edges flown by both searches.
+    :param seconds: wall-clock time of both searches [s].
+    """
+
+    best_cost: float
+    direct_cost: float
+    actions: list[Any]
+    direct_actions: list[Any]
+    flight_time: float
+    settings: dict[str, Any]
+    rollouts: int
+    seconds: float
+
+    def regret(self, cost: float) -> float:
+        return regret(cost, self.best_cost, self.direct_cost)
+
+
+@dataclass(frozen=True)
+class ScenarioReference:
+    """Bounds and references of one scenario (the content of one ``results/reference/*.json``)."""
+
+    scenario: Scenario
+    lower_bound: float
+    samplers: dict[str, SamplerReference]
+
+    def regret(self, cost: float, sampler: str) -> float:
+        """Regret of ``cost`` [J/kg] against this scenario's reference for ``sampler`` (NaN if absent)."""
+        ref = self.samplers.get(sampler)
+        return ref.regret(cost) if ref is not None else math.nan
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "schema": SCHEMA,
+            "scenario": self.scenario.to_dict(),
+            "lower_bound": self.lower_bound,
+            "samplers": {k: dataclasses.asdict(v) for k, v in self.samplers.items()},
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any], source: str = "reference") -> ScenarioReference:
+        try:
+            if d.get("schema") != SCHEMA:
+                raise ConfigError(f"{source}: schema={d.get('schema')!r}; this version reads schema {SCHEMA}")
+            return cls(
+                scenario=Scenario.from_dict(d["scenario"]),
+                lower_bound=float(d["lower_bound"]),
+                samplers={k: SamplerReference(**v) for k, v in d["samplers"].items()},
+            )
+        except (KeyError, TypeError, AttributeError) as exc:
+            raise ConfigError(f"{source} is not a reference file: {exc!r}") from None
+
+
+def reference_path(out_dir: str | Path, name: str) -> Path:
+    """``out_dir/<scenario name>.json``."""
+    return Path(out_dir) / f"{name}.json"
+
+
+def load_reference(path: str | Path) -> ScenarioReference:
+    """Read one reference file; a missing, unreadable or malformed file raises a ConfigError naming it."""
+    p = Path(path)
+    try:
+        d = json.loads(p.read_text())
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"reference file {str(p)!r} cannot be read: {exc}") from None
+    if not isinstance(d, dict):
+        raise ConfigError(f"reference file {str(p)!r} is not a JSON object")
+    return ScenarioReference.from_dict(d, source=f"reference file {str(p)!r}")
+
+
+def load_references(out_dir: str | Path) -> dict[str, ScenarioReference]:
+    """Every reference file in ``out_dir`` by scenario name ({} if the folder does not exist)."""
+    d = Path(out_dir)
+    if not d.is_dir():
+        return {}
+    refs = {}
+    for p in sorted(d.glob("*.json")):
+        r = load_reference(p)
+        refs[p.stem] = r
+    return refs
+
+
+def compute_reference(
+    scenario: Scenario,
+    samplers: Sequence[str] = SAMPLERS,
+    config: ReferenceConfig | None = None,
+    *,
+    model_kwargs: Mapping[str, Any] | None = None,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> ScenarioReference:
+    """Bounds, direct cost and best plan per action set for ``scenario``.
+
+    :param scenario: the scenario (its ``name`` is the file name under ``results/reference/``).
+    :param samplers: action sets, ``"primitive"`` and/or ``"continuous"``.
+    :param config: search settings (the same for the direct and the real field).
+    :param model_kwargs: further :class:`SoaringModel` arguments (aircraft, library, ...).
+    :param progress: called as ``progress(stage, depth, max_edges)`` (stage e.g. ``"primitive/direct"``).
+    """
+    cfg = config if config is not None else ReferenceConfig()
+    model = SoaringModel(scenario=scenario, **dict(model_kwargs or {}))
+    direct_model = without_thermals(model)
+    out: dict[str, SamplerReference] = {}
+    for sampler in samplers:
+        check_choice("sampler", sampler, SAMPLERS)
+        t0 = time.perf_counter()
+
+        def cb(stage: str) -> Callable[[int, int], None] | None:
+            if progress is None:
+                return None
+            return lambda d, n: progress(f"{sampler}/{stage}", d, n)
+
+        direct = search(direct_model, sampler, cfg, progress=cb("direct"))
+        seed = _core_controls(direct) if direct.plan.solved else None
+        best = search(model, sampler, cfg, seed_controls=seed, progress=cb("thermals"))
+        out[sampler] = SamplerReference(
+            best_cost=best.cost,
+            direct_cost=direct.cost,
+            actions=best.plan.to_dict()["actions"],
+            direct_actions=direct.plan.to_dict()["actions"],
+            flight_time=best.plan.flight_time,
+            settings=cfg.to_dict(),
+            rollouts=direct.rollouts + best.rollouts,
+            seconds=time.perf_counter() - t0,
+        )
+    return ScenarioReference(scenario=scenario, lower_bound=lower_bound(model), samplers=out)
+
+
+def _core_controls(res: SearchResult) -> np.ndarray:
+    """The plan's env actions as rows of the search's control vectors."""
+    acts = res.plan.actions
+    if res.plan.kind == "primitive":
+        return np.array([[float(a)] for a in acts])
+    return np.array([np.asarray(a, np.float64) for a in acts])
+
+
+def save_reference(ref: ScenarioReference, path: str | Path) -> None:
+    """Write ``ref`` as JSON, atomically."""
+    atomic_write_text(path, json.dumps(ref.to_dict(), indent=1))
+
+
+__all__ = [
+    "MIN_GAP",
+    "SamplerReference",
+    "ScenarioReference",
+    "compute_reference",
+    "load_reference",
+    "load_references",
+    "reference_path",
+    "save_reference",
+]
