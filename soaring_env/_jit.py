@@ -89,7 +89,7 @@ def _install_cache_key() -> None:
             for other in CacheImpl._locator_classes:
                 if other is cls:
                     continue
-                inner = other.from_function(py_func, py_file)
+                inner = other.from_function(py_func, py_file)  # type: ignore[attr-defined]
                 if inner is not None:
                     return cls(inner, package_source_hash(root))
             return None
