@@ -220,7 +220,6 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         self._install(self.scenario)
         self._start_episode()
         self._needs_reset = True
-        self._step_limit = -1
         self._renderer: Any = None
 
     # --- public attributes of the contract -------------------------------------------------------
@@ -329,10 +328,6 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
             self._install(sc)
         obs, info = self._start_episode()
         self._needs_reset = False
-        # gym.make's TimeLimit truncates without telling the env: count its steps here, so that a
-        # step after truncation raises as one after termination does
-        spec_limit = getattr(self.spec, "max_episode_steps", None)
-        self._step_limit = int(spec_limit) if spec_limit is not None else -1
         if self.render_mode == "human":
             self.render()
         return obs, info
@@ -390,7 +385,7 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         reward = sum(reward_terms.values())
         self._d_goal = d_new
         terminated = code != FLYING
-        self._needs_reset = terminated or self.steps == self._step_limit
+        self._needs_reset = terminated
         h = float(new_state[0, 3])
         self._path.append(out[0, : k + 1])
         hist = self.history
