@@ -38,6 +38,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from baselines._runs import holds_dir_lock, read_json
 from soaring_env._validation import ConfigError
 from soaring_env.scenario import SCENARIOS, Scenario, atomic_write_text, get_scenario, make_scenario
 
@@ -269,12 +270,14 @@ def _key(agent: str, scenario: str, seed: int) -> str:
 def _load_results(path: Path) -> dict[str, Any] | None:
     if not path.is_file():
         return None
-    data = json.loads(path.read_text())
-    if data.get("schema") != SCHEMA:
-        raise ConfigError(f"{path} has results schema {data.get('schema')!r}, expected {SCHEMA}; use a new directory")
+    data = read_json(path)
+    if not isinstance(data, dict) or data.get("schema") != SCHEMA:
+        schema = data.get("schema") if isinstance(data, dict) else type(data).__name__
+        raise ConfigError(f"{path} has results schema {schema!r}, expected {SCHEMA}; use a new directory")
     return data
 
 
+@holds_dir_lock(lambda a: a.arguments["out_dir"], "evaluation")
 def run_evaluation(
     config: EvalConfig,
     out_dir: str | Path,

@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from baselines._runs import holds_dir_lock, watch_parent
 from baselines.sst.core import SSTError
 from baselines.sst.soaring import SAMPLERS, SoaringSSTConfig
 from soaring_env.scenario import Scenario, atomic_write_text, get_scenario
@@ -161,6 +162,7 @@ def load_results(cfg: ExperimentConfig) -> dict[tuple[str, int], dict[str, Any]]
     return out
 
 
+@holds_dir_lock(lambda a: a.arguments["cfg"].out_dir, "experiment")
 def run_experiment(cfg: ExperimentConfig, *, progress: bool = True, fresh: bool = False) -> list[dict[str, Any]]:
     """Run every (planner, run) that has no result yet, ``cfg.workers`` at a time.
 
@@ -191,7 +193,9 @@ def run_experiment(cfg: ExperimentConfig, *, progress: bool = True, fresh: bool 
             os.environ.setdefault(var, "1")
         bar = _progress(len(jobs), len(done), progress)
         ctx = mp.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=min(cfg.workers, len(jobs)), mp_context=ctx) as pool:
+        workers = min(cfg.workers, len(jobs))
+        # workers exit when this process dies (SIGTERM, SIGKILL): watch_parent polls their parent PID
+        with ProcessPoolExecutor(workers, ctx, initializer=watch_parent, initargs=(os.getpid(),)) as pool:
             pending = {pool.submit(run_one, job) for job in jobs}
             while pending:
                 finished, pending = wait(pending, return_when=FIRST_COMPLETED)

@@ -21,6 +21,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from baselines._runs import check_cli_args
 from baselines.evaluation import (
     AGENT_NAMES,
     PPO_AGENTS,
@@ -57,6 +58,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--no-progress", action="store_true", help="no progress bar (per-episode lines stay)")
     p.add_argument("--list", action="store_true", help="list known agents and scenarios and exit")
     args = p.parse_args(argv)
+    check_cli_args(p, args, counts=("heldout",), seeds=("seeds",), dirs=("out",))
 
     if args.list:
         print("agents:", ", ".join(AGENT_NAMES))
@@ -95,7 +97,8 @@ def main(argv: list[str] | None = None) -> int:
             log=None if args.quiet else lambda line: print(line, flush=True),
         )
     except ConfigError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        p.print_usage(sys.stderr)  # argparse's usual usage + "error:" lines; status 2 as returned value
+        print(f"{p.prog}: error: {exc}", file=sys.stderr)
         return 2
     files = write_report(results, args.out)
     print()

@@ -17,6 +17,7 @@ import sys
 import time
 from pathlib import Path
 
+from baselines._runs import check_cli_args
 from baselines.experiment import ExperimentConfig, make_figures, run_experiment, write_report
 from baselines.sst.core import SSTError
 from baselines.sst.soaring import SoaringSSTConfig
@@ -37,6 +38,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--pruning-radius", type=float, default=SoaringSSTConfig.pruning_radius, help="delta_s [m]")
     ap.add_argument("--batch-size", type=int, default=SoaringSSTConfig.batch_size, help="expansions per round")
     args = ap.parse_args(argv)
+    check_cli_args(
+        ap, args, counts=("runs", "workers", "batch_size"), seeds=("seed",), positive=("time",), dirs=("out",)
+    )
 
     runs = args.runs if args.runs is not None else (3 if args.quick else 30)
     t_lim = args.time if args.time is not None else (5.0 if args.quick else 20.0)
@@ -56,7 +60,10 @@ def main(argv: list[str] | None = None) -> int:
         f"delta_BN={planner.selection_radius:g} m, delta_s={planner.pruning_radius:g} m, batch={planner.batch_size}",
         flush=True,
     )
-    records = run_experiment(cfg, progress=not args.no_progress, fresh=args.fresh)
+    try:
+        records = run_experiment(cfg, progress=not args.no_progress, fresh=args.fresh)
+    except SSTError as exc:  # e.g. the output folder is in use by another run
+        ap.error(str(exc))
     table, path = write_report(cfg, records)
     print()
     print(table)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
 
@@ -13,7 +14,16 @@ class ConfigError(ValueError):
 
 
 def check_finite(name: str, value: float) -> float:
-    """Return ``value`` as a float, or raise if it is NaN, infinite or not a number."""
+    """Return ``value`` as a Python float, or raise if it is NaN, infinite or not a number.
+
+    Strings, bytes and bools are refused rather than converted: ``"3"`` in a numeric field is a
+    typing mistake (a JSON or command-line value that was never parsed), and ``True`` is not a
+    quantity. Callers store the returned float, so every config holds plain floats.
+    """
+    if isinstance(value, (str, bytes, bool, np.bool_)):
+        raise ConfigError(
+            f"{name}={value!r} has type {type(value).__name__}; a finite real number (int or float) is required"
+        )
     try:
         v = float(value)
     except (TypeError, ValueError):
@@ -44,12 +54,70 @@ def check_range(
     return v
 
 
-def check_int(name: str, value: int, low: int) -> int:
+def check_int(name: str, value: int, low: int, high: int | None = None) -> int:
+    """Return ``value`` as an int in ``[low, high]`` (no upper limit if ``high`` is None)."""
+    allowed = f"an integer >= {low}" if high is None else f"an integer in [{low}, {high}]"
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise ConfigError(f"{name}={value!r} must be an integer >= {low}")
-    if value < low:
-        raise ConfigError(f"{name}={value!r} must be an integer >= {low}")
+        raise ConfigError(f"{name}={value!r} must be {allowed}")
+    if value < low or (high is not None and value > high):
+        raise ConfigError(f"{name}={value!r} must be {allowed}")
     return int(value)
+
+
+def check_bool(name: str, value: bool) -> bool:
+    if not isinstance(value, (bool, np.bool_)):
+        raise ConfigError(f"{name}={value!r} has type {type(value).__name__}; a bool is required")
+    return bool(value)
+
+
+def check_type(name: str, value: object, cls: type | tuple[type, ...], what: str | None = None) -> None:
+    """Raise unless ``value`` is an instance of ``cls`` (``what`` describes it in the message)."""
+    if not isinstance(value, cls):
+        names = what or " or ".join(c.__name__ for c in (cls if isinstance(cls, tuple) else (cls,)))
+        raise ConfigError(f"{name}={value!r} has type {type(value).__name__}; {names} is required")
+
+
+def check_seed(name: str, value: int | None) -> int | None:
+    """A random seed: None or an integer in [0, 2^63) (what ``np.random.default_rng`` accepts)."""
+    if value is None:
+        return None
+    return check_int(name, value, 0, 2**63 - 1)
+
+
+def check_pair(name: str, value: object, low: float, high: float, *, integer: bool = False) -> tuple[float, float]:
+    """An ordered pair ``(a, b)`` with ``low <= a <= b <= high``, all finite (integers if asked)."""
+    kind = "integers" if integer else "finite numbers"
+    msg = f"{name}={value!r} must be a pair (low, high) of {kind} with {low:g} <= low <= high <= {high:g}"
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != 2:  # type: ignore[arg-type]
+        raise ConfigError(msg)
+    a: Any = value[0]  # type: ignore[index]
+    b: Any = value[1]  # type: ignore[index]
+    pa: float
+    pb: float
+    try:
+        if integer:
+            pa, pb = check_int(f"{name}[0]", a, -(2**62)), check_int(f"{name}[1]", b, -(2**62))
+        else:
+            pa, pb = check_finite(f"{name}[0]", a), check_finite(f"{name}[1]", b)
+    except ConfigError:
+        raise ConfigError(msg) from None
+    if not low <= pa <= pb <= high:
+        raise ConfigError(msg)
+    return pa, pb
+
+
+def as_float_array(name: str, value: object) -> np.ndarray:
+    """``value`` as a float64 array, or a ConfigError naming ``name``: real numbers only (no strings,
+    bools, objects or ragged lists -- numpy would convert ``"3"`` silently or fail with its own message)."""
+    if type(value) is np.ndarray and value.dtype == np.float64:  # the hot path: nothing to convert
+        return value
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{name}={value!r} is not an array of numbers (ragged or mixed)") from None
+    if arr.dtype.kind not in "fiu":
+        raise ConfigError(f"{name}={value!r} has dtype {arr.dtype}; real numbers are required")
+    return arr.astype(np.float64, copy=False)
 
 
 def check_choice(name: str, value: str, choices: Iterable[str]) -> str:

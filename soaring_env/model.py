@@ -16,9 +16,18 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from soaring_env._validation import ConfigError, check_array_finite, check_positive, check_range
+from soaring_env._validation import ConfigError, check_array_finite, check_range, check_type
 from soaring_env.physics.aircraft import Aircraft
-from soaring_env.primitives import DEFAULT_MAX_SUBSTEP, N_PRIMITIVES, PrimitiveLibrary, Propagator, Rollout, rollout
+from soaring_env.physics.atmosphere import MAX_HEIGHT
+from soaring_env.primitives import (
+    DEFAULT_MAX_SUBSTEP,
+    N_PRIMITIVES,
+    PrimitiveLibrary,
+    Propagator,
+    Rollout,
+    check_substep,
+    rollout,
+)
 from soaring_env.scenario import Scenario, paper_scenario
 
 #: Edge outcome codes returned by :meth:`SoaringModel.classify`.
@@ -84,6 +93,11 @@ class SoaringModel:
     :param max_substep: largest integration substep near thermals [s].
     :param max_bank_deg: bank-angle limit [deg] used by action masks and planners (the tightest
         spiral needs 52 deg at Ts = 30 s).
+
+    The domain's ceiling must leave room for one edge below ``MAX_HEIGHT`` (11 km):
+    ``bounds.height_max + Ts (fastest climb + the field's updraft bound) < MAX_HEIGHT``. Every edge of
+    the env and the planner starts inside the domain, so an edge that climbs past the ceiling ends
+    as an ``out_of_bounds`` event and is never integrated above the troposphere.
     """
 
     scenario: Scenario = dataclasses.field(default_factory=paper_scenario)
@@ -93,8 +107,20 @@ class SoaringModel:
     max_bank_deg: float = 60.0
 
     def __post_init__(self) -> None:
-        check_positive("max_substep", self.max_substep)
-        check_range("max_bank_deg", self.max_bank_deg, 0.0, 90.0, low_open=True, high_open=True)
+        check_type("scenario", self.scenario, Scenario)
+        check_type("aircraft", self.aircraft, Aircraft)
+        check_type("library", self.library, PrimitiveLibrary)
+        object.__setattr__(self, "max_substep", check_substep("max_substep", self.max_substep))
+        bank = check_range("max_bank_deg", self.max_bank_deg, 0.0, 90.0, low_open=True, high_open=True)
+        object.__setattr__(self, "max_bank_deg", bank)
+        hmax = self.scenario.bounds.height_max
+        reach = hmax + self.library.duration * (self.library.max_climb_rate + self.scenario.field.updraft_bound)
+        if reach >= MAX_HEIGHT:
+            raise ConfigError(
+                f"bounds.height_max={hmax!r} m is too high for Ts={self.library.duration:g} s: an edge from the "
+                f"ceiling could climb to {reach:.6g} m; allowed: ceiling + Ts x (climb rate + updraft bound) "
+                f"< {MAX_HEIGHT:g} m"
+            )
 
     # --- propagation -----------------------------------------------------------------------
     def rollout_primitive(self, states, primitive, *, t0=0.0, airspeed_prev=None) -> Rollout:

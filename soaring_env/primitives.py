@@ -23,9 +23,16 @@ import numpy as np
 from numba import njit
 
 from soaring_env._jit import FASTMATH as _FM
-from soaring_env._validation import ConfigError, check_array_finite, check_int, check_positive
+from soaring_env._validation import (
+    ConfigError,
+    as_float_array,
+    check_array_finite,
+    check_int,
+    check_range,
+    check_type,
+)
 from soaring_env.physics.aircraft import _AC_ETA, _AC_MASS, _AC_MODEL, Aircraft, _thrust_at, _thrust_coeffs
-from soaring_env.physics.atmosphere import LAPSE, T0, G, _density, _density_near
+from soaring_env.physics.atmosphere import LAPSE, MAX_HEIGHT, T0, G, _density, _density_near
 from soaring_env.physics.thermals import _GAUSSIAN, GAUSSIAN_CUTOFF, WindField, updraft_at, within_allen_reach
 
 FAMILIES = ("straight", "curve", "spiral", "spline")
@@ -37,8 +44,18 @@ CURVE_TURN_DEG = (-90.0, -60.0, -30.0, 30.0, 60.0, 90.0)
 SPIRAL_TURN_DEG = (-1080.0, -720.0, -360.0, -180.0, 180.0, 360.0, 720.0, 1080.0)
 SPLINE_TURN_DEG = (-90.0, -60.0, 60.0, 90.0)
 N_PRIMITIVES = 174
-#: Start heights must lie below the ISA troposphere's top [m].
-MAX_HEIGHT = 11000.0
+#: Every height a rollout reaches must lie below the ISA troposphere's top [m] (re-exported from
+#: ``physics.atmosphere``): :func:`rollout` refuses edges that could climb past it.
+#: Shortest and longest edge [s]: below 10 ms the closed-form turn terms lose all precision (1e-300 s
+#: divided by zero inside the kernel); above an hour a single edge is no longer a motion primitive,
+#: and the substep count (duration / max_substep) must stay bounded so that no call can hang.
+MIN_DURATION = 0.01
+MAX_DURATION = 3600.0
+#: Finest integration substep [s]: 500x finer than the default, far past any accuracy gain (10x
+#: finer already moves heights by < 1 cm), and at most 3.6 million substeps per edge.
+MIN_SUBSTEP = 1e-3
+#: Most output points per edge (each is 4 floats per rollout row).
+MAX_POINTS = 100_000
 
 #: Default largest integration substep near thermals [s]; a 10x finer step moves the height after a
 #: primitive through a thermal core by < 1 cm (tests; 8.4 mm in the worst tested case). Across
@@ -61,8 +78,9 @@ class PrimitiveLibrary:
     at output point ``N // 2`` (time ``(N // 2) Ts / N``, i.e. ``Ts / 2`` for even N), as the
     paper's eq. 11 defines them on the discrete time grid.
 
-    :param duration: primitive duration Ts [s] (not given in the paper; default 30 s).
-    :param n_points: number N of output points per primitive (default 30, >= 2).
+    :param duration: primitive duration Ts [s] (not given in the paper; default 30 s), in
+        [``MIN_DURATION``, ``MAX_DURATION``] = [0.01, 3600] s.
+    :param n_points: number N of output points per primitive (default 30, 2 ... ``MAX_POINTS``).
     """
 
     duration: float = 30.0
@@ -72,10 +90,12 @@ class PrimitiveLibrary:
     kernel_rows: np.ndarray = field(init=False, repr=False, compare=False)
     #: the same rows as 174 separate (1, 4) arrays, for single-edge calls without allocation.
     kernel_row: tuple[np.ndarray, ...] = field(init=False, repr=False, compare=False)
+    #: fastest climb of any primitive, v_a sin(gamma) [m/s] (20 sin 45 deg): bounds the height an edge reaches.
+    max_climb_rate: float = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        check_positive("duration", self.duration)
-        check_int("n_points", self.n_points, 2)
+        object.__setattr__(self, "duration", check_duration("duration", self.duration))
+        object.__setattr__(self, "n_points", check_int("n_points", self.n_points, 2, MAX_POINTS))
         rows: list[tuple[float, float, float, float, float]] = []
         ts = self.duration
 
@@ -104,6 +124,7 @@ class PrimitiveLibrary:
         rows_k = np.ascontiguousarray(table[:, [COL_AIRSPEED, COL_GAMMA, COL_CHI_DOT_1, COL_CHI_DOT_2]])
         object.__setattr__(self, "kernel_rows", rows_k)
         object.__setattr__(self, "kernel_row", tuple(rows_k[i : i + 1].copy() for i in range(N_PRIMITIVES)))
+        object.__setattr__(self, "max_climb_rate", float(np.max(table[:, COL_AIRSPEED] * np.sin(table[:, COL_GAMMA]))))
 
     def __len__(self) -> int:
         return N_PRIMITIVES
@@ -190,33 +211,54 @@ def rollout(
     :param t0: start time [s], scalar or (B,); matters only for drifting thermals.
     :param airspeed_prev: airspeed of the previous edge [m/s] (scalar or (B,)), for the kinetic
         term; None or NaN entries charge nothing.
-    :param max_substep: largest integration substep near thermals [s].
+    :param max_substep: largest integration substep near thermals [s], at least ``MIN_SUBSTEP``.
     :returns: a :class:`Rollout`; always batched (B >= 1).
+    :raises ConfigError: naming the argument, for bad shapes and values, start heights below the
+        ground (h < 0), and edges that could climb to ``MAX_HEIGHT`` (11 km, the top of the ISA
+        troposphere the energy model holds in): start height + duration x (climb rate + the field's
+        updraft bound) must stay below it.
     """
+    if library is not None:
+        check_type("library", library, PrimitiveLibrary)
+    check_type("field", field, WindField)
+    check_type("aircraft", aircraft, Aircraft)
     lib = library if library is not None else _default_library()
-    x = np.asarray(states, dtype=np.float64)
+    x = as_float_array("states", states)
     if x.ndim == 1:
         x = x[None, :]
-    if x.ndim != 2 or x.shape[1] != 4:
-        raise ConfigError(f"states has shape {np.shape(states)}; expected (4,) or (B, 4) [Pn, Pe, chi, h]")
+    if x.ndim != 2 or x.shape[1] != 4 or x.shape[0] == 0:
+        raise ConfigError(f"states has shape {np.shape(states)}; expected (4,) or (B, 4) [Pn, Pe, chi, h] with B >= 1")
     check_array_finite("states", x)
-    if np.any(x[:, 3] >= MAX_HEIGHT):
-        raise ConfigError(f"states height {x[:, 3].max()!r} m is outside the model's range: below {MAX_HEIGHT:g} m")
+    if x.shape[0] == 1:  # batch-1 calls (the planners' replays, action masks) skip two reductions
+        h_top = h_low = float(x[0, 3])
+    else:
+        h_top, h_low = float(x[:, 3].max()), float(x[:, 3].min())
+    if h_top >= MAX_HEIGHT:
+        raise ConfigError(f"states height {h_top!r} m is outside the model's range: below {MAX_HEIGHT:g} m")
+    if h_low < 0.0:
+        raise ConfigError(f"states height {h_low!r} m is below the ground; allowed: 0 <= h < {MAX_HEIGHT:g} m")
     if (primitive is None) == (control is None):
         raise ConfigError("rollout needs exactly one of primitive= or control=")
     if primitive is not None:
         idx = np.asarray(primitive)
-        if idx.ndim > 1 or idx.dtype.kind not in "iu" or np.any(idx < 0) or np.any(idx >= N_PRIMITIVES):
+        if (
+            idx.ndim > 1
+            or idx.size == 0
+            or idx.dtype.kind not in "iu"
+            or np.any(idx < 0)
+            or np.any(idx >= N_PRIMITIVES)
+        ):
             raise ConfigError(
                 f"primitive={primitive!r} is invalid; allowed: an integer or 1-D integer array in 0..{N_PRIMITIVES - 1}"
             )
         b = _batch(x.shape[0], idx.size if idx.ndim else 1, "primitive")
         ctrl = np.take(lib.kernel_rows, np.broadcast_to(idx, (b,)), axis=0)  # 5x faster than [idx]
+        climb = lib.max_climb_rate
     else:
-        u = np.asarray(control, dtype=np.float64)
+        u = as_float_array("control", control)
         if u.ndim == 1:
             u = u[None, :]
-        if u.ndim != 2 or u.shape[1] != 3:
+        if u.ndim != 2 or u.shape[1] != 3 or u.shape[0] == 0:
             raise ConfigError(f"control has shape {np.shape(control)}; expected (3,) or (B, 3) [v_a, chi_dot, gamma]")
         check_array_finite("control", u)
         b = _batch(x.shape[0], u.shape[0], "control")
@@ -226,14 +268,23 @@ def rollout(
         if np.any(np.abs(u[:, 2]) >= math.pi / 2):
             raise ConfigError(f"control gamma {np.abs(u[:, 2]).max()!r} must lie in (-pi/2, pi/2) rad")
         ctrl = np.ascontiguousarray(np.stack([u[:, 0], u[:, 2], u[:, 1], u[:, 1]], axis=1))
-    dur = lib.duration if duration is None else check_positive("duration", duration)
-    check_positive("max_substep", max_substep)
-    t0a = np.ascontiguousarray(np.broadcast_to(np.asarray(t0, dtype=np.float64), (b,)))
+        climb = float(np.max(u[:, 0] * np.sin(np.abs(u[:, 2]))))
+    dur = lib.duration if duration is None else check_duration("duration", duration)
+    check_substep("max_substep", max_substep)
+    # The energy model holds below MAX_HEIGHT only: refuse an edge that could climb to it rather
+    # than return a cost computed with the troposphere's density above its top.
+    reach = h_top + dur * (max(climb, 0.0) + field.updraft_bound)
+    if reach >= MAX_HEIGHT:
+        raise ConfigError(
+            f"states height {h_top:g} m is too close to the model's ceiling: an edge of {dur:g} s could climb to "
+            f"{reach:.6g} m; allowed: every height below {MAX_HEIGHT:g} m (the ISA troposphere)"
+        )
+    t0a = _per_row("t0", t0, b)
     check_array_finite("t0", t0a)
     if airspeed_prev is None:
         vp = np.full(b, np.nan)
     else:
-        vp = np.broadcast_to(np.asarray(airspeed_prev, np.float64), (b,))
+        vp = _per_row("airspeed_prev", airspeed_prev, b)
         known = vp[~np.isnan(vp)]
         if np.any(~np.isfinite(known) | (known <= 0.0)):
             raise ConfigError(
@@ -351,6 +402,25 @@ def field_params(field: WindField) -> np.ndarray:
     zi [m], model code, thermal drift velocity north, east [m/s] (zero unless ``drift``)."""
     dvx, dvy = (field.wind_north, field.wind_east) if field.drift else (0.0, 0.0)
     return np.array([field.wind_north, field.wind_east, field.zi, float(field.model_code), dvx, dvy])
+
+
+def check_duration(name: str, value: float) -> float:
+    """An edge duration [s] in [``MIN_DURATION``, ``MAX_DURATION``]."""
+    return check_range(name, value, MIN_DURATION, MAX_DURATION)
+
+
+def check_substep(name: str, value: float) -> float:
+    """A largest integration substep [s] of at least ``MIN_SUBSTEP`` (finer ones can hang a rollout)."""
+    v = check_range(name, value, MIN_SUBSTEP, math.inf, high_open=True)
+    return v
+
+
+def _per_row(name: str, value: object, b: int) -> np.ndarray:
+    """A scalar or (B,) argument as a (B,) float64 array, or a ConfigError naming it."""
+    a = as_float_array(name, value)
+    if a.ndim > 1 or (a.ndim == 1 and a.shape[0] not in (1, b)):
+        raise ConfigError(f"{name} has shape {a.shape}; expected a scalar, (1,) or ({b},) (one per rollout row)")
+    return np.ascontiguousarray(np.broadcast_to(a, (b,)))
 
 
 def _batch(n_states: int, n_controls: int, what: str) -> int:

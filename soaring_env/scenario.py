@@ -19,8 +19,21 @@ from typing import Any
 
 import numpy as np
 
-from soaring_env._validation import ConfigError, check_finite, check_positive, check_range
-from soaring_env.physics.thermals import Thermal, WindField
+from soaring_env._validation import (
+    ConfigError,
+    check_bool,
+    check_choice,
+    check_finite,
+    check_pair,
+    check_positive,
+    check_range,
+    check_type,
+)
+from soaring_env.physics.atmosphere import MAX_HEIGHT
+from soaring_env.physics.thermals import THERMAL_MODELS, Thermal, WindField
+
+#: Most thermals a random scenario may draw (the kernels loop over all of them at every point).
+MAX_RANDOM_THERMALS = 100
 
 
 @dataclass(frozen=True)
@@ -28,7 +41,7 @@ class Bounds:
     """Flight domain [m]: leaving it ends an episode; the ground is at height 0.
 
     :param north_min: [m]; :param north_max: [m]; :param east_min: [m]; :param east_max: [m];
-    :param height_max: ceiling [m].
+    :param height_max: ceiling [m], below ``MAX_HEIGHT`` (11 km: the energy model's ISA troposphere).
     """
 
     north_min: float = -1000.0
@@ -39,8 +52,9 @@ class Bounds:
 
     def __post_init__(self) -> None:
         for name in ("north_min", "north_max", "east_min", "east_max"):
-            check_finite(f"bounds.{name}", getattr(self, name))
-        check_positive("bounds.height_max", self.height_max)
+            object.__setattr__(self, name, check_finite(f"bounds.{name}", getattr(self, name)))
+        hmax = check_range("bounds.height_max", self.height_max, 0.0, MAX_HEIGHT, low_open=True, high_open=True)
+        object.__setattr__(self, "height_max", hmax)
         if self.north_max <= self.north_min:
             raise ConfigError(f"bounds.north_max={self.north_max!r} must be > north_min={self.north_min!r}")
         if self.east_max <= self.east_min:
@@ -80,12 +94,13 @@ class GoalRegion:
     radius: float = 150.0
 
     def __post_init__(self) -> None:
-        check_finite("goal.north", self.north)
-        check_finite("goal.east", self.east)
+        object.__setattr__(self, "north", check_finite("goal.north", self.north))
+        object.__setattr__(self, "east", check_finite("goal.east", self.east))
         h = check_finite("goal.height", self.height)
         if h <= 0.0:
             raise ConfigError(f"goal.height={self.height!r} is at or below the ground; it must be > 0 m")
-        check_positive("goal.radius", self.radius)
+        object.__setattr__(self, "height", h)
+        object.__setattr__(self, "radius", check_positive("goal.radius", self.radius))
 
     @property
     def centre(self) -> np.ndarray:
@@ -121,8 +136,12 @@ class Scenario:
     name: str = "custom"
 
     def __post_init__(self) -> None:
-        if len(self.start) != 4:
-            raise ConfigError(f"start={self.start!r} must be (Pn, Pe, chi, h)")
+        check_type("field", self.field, WindField)
+        check_type("goal", self.goal, GoalRegion)
+        check_type("bounds", self.bounds, Bounds)
+        check_type("name", self.name, str)
+        if isinstance(self.start, (str, bytes)) or not hasattr(self.start, "__len__") or len(self.start) != 4:
+            raise ConfigError(f"start={self.start!r} must be 4 numbers (Pn [m], Pe [m], chi [rad], h [m])")
         start = tuple(check_finite(f"start[{i}]", v) for i, v in enumerate(self.start))
         object.__setattr__(self, "start", start)
         n, e, _, h = start
@@ -169,26 +188,59 @@ class Scenario:
         }
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> Scenario:
+    def from_dict(cls, d: dict[str, Any], *, source: str = "scenario") -> Scenario:
+        """The inverse of :meth:`to_dict`. Missing and unknown keys and values of the wrong type raise
+        a :class:`ConfigError` that names ``source`` (e.g. the file), the key and what is expected."""
         try:
-            fd = dict(d["field"])
-            thermals = tuple(Thermal(**t) for t in fd.pop("thermals", []))
+            top = _keys(d, f"{source}", required=("start", "goal", "bounds", "field"), optional=("name",))
+            fd = _keys(
+                top["field"],
+                f"{source}: field",
+                required=(),
+                optional=("model", "zi", "wind_north", "wind_east", "drift", "thermals"),
+            )
+            raw_thermals = fd.pop("thermals", [])
+            if not isinstance(raw_thermals, (list, tuple)):
+                raise ConfigError(f"{source}: field.thermals={raw_thermals!r} must be a list of thermal objects")
+            thermals = tuple(
+                Thermal(
+                    **_keys(
+                        t, f"{source}: field.thermals[{i}]", required=("north", "east"), optional=("strength", "radius")
+                    )
+                )
+                for i, t in enumerate(raw_thermals)
+            )
+            start = top["start"]
+            if not isinstance(start, (list, tuple)):
+                raise ConfigError(f"{source}: start={start!r} must be a list of 4 numbers [Pn, Pe, chi, h]")
+            goal = _keys(top["goal"], f"{source}: goal", required=(), optional=("north", "east", "height", "radius"))
+            bounds = _keys(
+                top["bounds"],
+                f"{source}: bounds",
+                required=(),
+                optional=("north_min", "north_max", "east_min", "east_max", "height_max"),
+            )
             return cls(
                 field=WindField(thermals=thermals, **fd),
-                start=tuple(d["start"]),
-                goal=GoalRegion(**d["goal"]),
-                bounds=Bounds(**d["bounds"]),
-                name=d.get("name", "custom"),
+                start=tuple(start),
+                goal=GoalRegion(**goal),
+                bounds=Bounds(**bounds),
+                name=top.get("name", "custom"),
             )
-        except (KeyError, TypeError) as exc:
-            raise ConfigError(f"scenario dict is malformed: {exc}") from None
+        except ConfigError as exc:
+            msg = str(exc)
+            raise ConfigError(msg if msg.startswith(source) else f"{source}: {msg}") from None
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), indent=2)
 
     @classmethod
-    def from_json(cls, text: str) -> Scenario:
-        return cls.from_dict(json.loads(text))
+    def from_json(cls, text: str, *, source: str = "scenario JSON") -> Scenario:
+        try:
+            d = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise ConfigError(f"{source} is not valid JSON: {exc}") from None
+        return cls.from_dict(d, source=source)
 
     def save(self, path: str | os.PathLike[str]) -> None:
         """Write the scenario as JSON, atomically (temporary file + rename)."""
@@ -196,7 +248,25 @@ class Scenario:
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> Scenario:
-        return cls.from_json(Path(path).read_text())
+        """Read a scenario written by :meth:`save`; errors name the file."""
+        try:
+            text = Path(path).read_text()
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ConfigError(f"cannot read scenario file {str(path)!r}: {exc}") from None
+        return cls.from_json(text, source=f"scenario file {str(path)!r}")
+
+
+def _keys(d: Any, where: str, *, required: tuple[str, ...], optional: tuple[str, ...]) -> dict[str, Any]:
+    """``d`` as a dict with string keys, all ``required`` present and nothing beyond ``optional``."""
+    if not isinstance(d, dict):
+        raise ConfigError(f"{where} must be an object (dict), got {type(d).__name__} {d!r}")
+    missing = [k for k in required if k not in d]
+    if missing:
+        raise ConfigError(f"{where} lacks the key(s) {missing!r}; required: {', '.join(required)}")
+    unknown = sorted(str(k) for k in d if k not in required + optional)
+    if unknown:
+        raise ConfigError(f"{where} has unknown key(s) {unknown!r}; allowed: {', '.join(required + optional)}")
+    return dict(d)
 
 
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:
@@ -239,6 +309,16 @@ def get_scenario(name: str) -> Scenario:
     return SCENARIOS[name]()
 
 
+#: Goal radius of random scenarios [m].
+_RANDOM_GOAL_RADIUS = 150.0
+
+
+def check_int_pair(name: str, value: Any, low: int, high: int) -> tuple[int, int]:
+    """An ordered pair of integers in [low, high]."""
+    a, b = check_pair(name, value, low, high, integer=True)
+    return int(a), int(b)
+
+
 def make_scenario(
     rng: np.random.Generator,
     *,
@@ -258,14 +338,34 @@ def make_scenario(
     Thermal count, positions (in the band between start and goal, so that using them is a real
     choice), strengths w* [m/s], wind speed [m/s] and direction, start heading and height, goal
     bearing, distance [m] and height are all drawn uniformly from the given ranges.
+
+    Every range is an ordered pair ``(low, high)`` of finite numbers: ``n_thermals`` integers in
+    [0, ``MAX_RANDOM_THERMALS``], ``strength`` in (0, 20] m/s, ``wind_speed`` in [0, 50] m/s,
+    ``goal_distance`` above the goal radius (150 m) and within the domain, ``height`` inside
+    (0, ``bounds.height_max``]; a bad one raises a :class:`ConfigError` naming it.
     """
-    bounds = bounds or Bounds(-3000.0, 3000.0, -3000.0, 3000.0, 1500.0)
-    check_range("n_thermals[0]", n_thermals[0], 0, 1000)
-    if n_thermals[1] < n_thermals[0]:
-        raise ConfigError(f"n_thermals={n_thermals!r} must be (low, high) with low <= high")
-    for nm, (lo, hi) in (("strength", strength), ("wind_speed", wind_speed), ("goal_distance", goal_distance)):
-        if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo <= hi):
-            raise ConfigError(f"{nm}={(lo, hi)!r} must be finite (low, high) with 0 <= low <= high")
+    check_type("rng", rng, np.random.Generator)
+    if bounds is None:
+        bounds = Bounds(-3000.0, 3000.0, -3000.0, 3000.0, 1500.0)
+    check_type("bounds", bounds, Bounds)
+    n_thermals = check_int_pair("n_thermals", n_thermals, 0, MAX_RANDOM_THERMALS)
+    strength = check_pair("strength", strength, 0.0, 20.0)
+    if strength[0] <= 0.0:
+        raise ConfigError(f"strength={strength!r} must have low > 0 m/s (a thermal's w* or peak is positive)")
+    wind_speed = check_pair("wind_speed", wind_speed, 0.0, 50.0)
+    goal_distance = check_pair("goal_distance", goal_distance, _RANDOM_GOAL_RADIUS, math.inf)
+    if goal_distance[0] <= _RANDOM_GOAL_RADIUS:
+        raise ConfigError(
+            f"goal_distance={goal_distance!r} must have low > {_RANDOM_GOAL_RADIUS:g} m (the goal radius)"
+        )
+    height = check_pair("height", height, 0.0, bounds.height_max)
+    if height[0] <= 0.0:
+        raise ConfigError(f"height={height!r} must have low > 0 m (above the ground)")
+    check_type("model", model, str)
+    check_choice("model", model, THERMAL_MODELS)
+    zi = check_positive("zi", zi)
+    drift = check_bool("drift", drift)
+    check_type("name", name, str)
     span_n = bounds.north_max - bounds.north_min
     span_e = bounds.east_max - bounds.east_min
     if goal_distance[1] > 0.9 * math.hypot(span_n, span_e):
@@ -320,7 +420,7 @@ def make_scenario(
                 drift=drift,
             ),
             start=(sn, se, chi, sh),
-            goal=GoalRegion(north=gn, east=ge, height=gh, radius=150.0),
+            goal=GoalRegion(north=gn, east=ge, height=gh, radius=_RANDOM_GOAL_RADIUS),
             bounds=bounds,
             name=name,
         )

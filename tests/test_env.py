@@ -202,7 +202,7 @@ def test_classify_kernel_equals_model_classify(seed: int) -> None:
     states[:, 0] = rng.uniform(sc.bounds.north_min - 300, sc.bounds.north_max + 300, b)
     states[:, 1] = rng.uniform(sc.bounds.east_min - 300, sc.bounds.east_max + 300, b)
     states[:, 2] = rng.uniform(-np.pi, np.pi, b)
-    states[:, 3] = rng.uniform(-50, sc.bounds.height_max + 100, b)
+    states[:, 3] = rng.uniform(0.0, sc.bounds.height_max + 100, b)  # rollout() refuses starts below ground
     states[:8, :2] = [sc.goal.north, sc.goal.east]  # some edges start at the goal
     states[:8, 3] = sc.goal.height + rng.uniform(-200, 200, 8)
     r = model.rollout_primitive(states, rng.integers(0, N_PRIMITIVES, b))

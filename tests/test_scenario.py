@@ -216,19 +216,39 @@ def test_bounds_and_goal_geometry() -> None:
 
 
 @pytest.mark.parametrize(
-    "mutate",
+    ("mutate", "match"),
     [
-        lambda d: d.pop("goal"),
-        lambda d: d["field"].update(thermals=[{"north": 0.0}]),
-        lambda d: d["field"].update(colour="blue"),
-        lambda d: d["bounds"].update(north_minimum=0.0),
+        (lambda d: d.pop("goal"), r"lacks the key\(s\) \['goal'\]"),
+        (lambda d: d["field"].update(thermals=[{"north": 0.0}]), r"field\.thermals\[0\] lacks the key\(s\) \['east'\]"),
+        (lambda d: d["field"].update(colour="blue"), r"field has unknown key\(s\) \['colour'\]"),
+        (lambda d: d["bounds"].update(north_minimum=0.0), r"bounds has unknown key\(s\) \['north_minimum'\]"),
+        (lambda d: d.update(extra=1), r"unknown key\(s\) \['extra'\]"),
+        (lambda d: d.update(goal=[1, 2]), r"goal must be an object"),
+        (lambda d: d["field"].update(wind_north="3"), r"wind_north='3' has type str"),
+        (lambda d: d.update(start="0,0,0,300"), r"start='0,0,0,300' must be a list"),
+        (lambda d: d.update(name=7), r"name=7 has type int"),
     ],
 )
-def test_from_dict_malformed(mutate: object) -> None:
+def test_from_dict_malformed(mutate: object, match: str) -> None:
     d = paper_scenario().to_dict()
     mutate(d)  # type: ignore[operator]
-    with pytest.raises(ConfigError, match="malformed"):
+    with pytest.raises(ConfigError, match=match):
         Scenario.from_dict(d)
+
+
+def test_load_names_the_file(tmp_path: Path) -> None:
+    p = tmp_path / "broken.json"
+    p.write_text('{"name": "x", ')
+    with pytest.raises(ConfigError, match=r"broken\.json.*not valid JSON"):
+        Scenario.load(p)
+    d = paper_scenario().to_dict()
+    del d["bounds"]["height_max"]
+    d["bounds"]["ceiling"] = 1.0
+    p.write_text(json.dumps(d))
+    with pytest.raises(ConfigError, match=r"broken\.json.*bounds has unknown key\(s\) \['ceiling'\]"):
+        Scenario.load(p)
+    with pytest.raises(ConfigError, match=r"cannot read scenario file.*missing\.json"):
+        Scenario.load(tmp_path / "missing.json")
 
 
 def test_from_json_invalid_values_name_the_field() -> None:

@@ -21,6 +21,8 @@ import math
 import numpy as np
 from numba import njit
 
+import soaring_env._jit  # noqa: F401  (before any kernel: the package-wide numba cache key)
+
 # Node status codes.
 FREE, ACTIVE, INACTIVE, SOLUTION = 0, 1, 2, 3
 # Edge outcomes reported by a propagator.

@@ -10,13 +10,15 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
 from baselines.sst.core import SSTError, SSTStats, check_budget
-from baselines.sst.plan import Plan, plan_soaring
+from baselines.sst.plan import Plan, as_sst_config, plan_soaring
 from baselines.sst.soaring import SoaringSSTConfig
+from soaring_env._validation import check_int
 
 
 class SSTAgent:
@@ -45,14 +47,14 @@ class SSTAgent:
         time_limit: float | None = 1.0,
         max_iterations: int | None = None,
         seed: int = 0,
-        config: SoaringSSTConfig | None = None,
+        config: SoaringSSTConfig | Mapping[str, Any] | None = None,
     ) -> None:
         if not hasattr(env, "unwrapped") or not hasattr(env, "action_space"):
             raise SSTError(f"env={env!r} is not a gymnasium env (needs .unwrapped and .action_space)")
         self.time_limit, self.max_iterations = check_budget(time_limit, max_iterations)
         self.env = env
-        self.seed = int(seed)
-        self.config = config
+        self.seed = check_int("seed", seed, 0, 2**62)
+        self.config = None if config is None else as_sst_config(config)
         self.sampler = "primitive" if hasattr(env.action_space, "n") else "continuous"
         self.plan_: Plan | None = None
         self.stats: SSTStats | None = None

@@ -69,7 +69,7 @@ import numpy as np
 
 from baselines.sst import _kernels as K
 from baselines.sst._kernels import EDGE_GOAL, EDGE_INVALID, EDGE_VALID
-from soaring_env._validation import ConfigError, check_finite, check_int, check_positive
+from soaring_env._validation import ConfigError, check_finite, check_int, check_positive, check_seed
 
 __all__ = [
     "EDGE_GOAL",
@@ -337,7 +337,7 @@ class SST:
             raise SSTError(f"problem={problem!r} does not implement the Problem protocol")
         self.problem = problem
         self.params = params or SSTParams()
-        self.seed = seed
+        self.seed = check_seed("seed", seed)
         self.rng = np.random.default_rng(seed)
         sp = problem.space
         self.space = sp

@@ -10,7 +10,8 @@ the env makes.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -18,6 +19,7 @@ import numpy as np
 from baselines.sst.core import SST, SSTParams, SSTResult, SSTStats
 from baselines.sst.reference import ReferenceSST
 from baselines.sst.soaring import S_T, S_V, SoaringProblem, SoaringSSTConfig
+from soaring_env._validation import ConfigError, check_bool, check_seed
 from soaring_env.model import GOAL, SoaringModel
 
 
@@ -146,7 +148,7 @@ def make_planner(
     model: SoaringModel,
     sampler: str = "primitive",
     *,
-    config: SoaringSSTConfig | None = None,
+    config: SoaringSSTConfig | Mapping[str, Any] | None = None,
     seed: int | None = 0,
     start: np.ndarray | None = None,
     t0: float = 0.0,
@@ -155,7 +157,9 @@ def make_planner(
 ) -> tuple[SoaringProblem, SST | ReferenceSST]:
     """Build the soaring problem and an SST planner over it (``reference=True``: the plain
     :class:`ReferenceSST`). Arguments as in :func:`plan_soaring`."""
-    cfg = config or SoaringSSTConfig()
+    cfg = as_sst_config(config)
+    check_seed("seed", seed)
+    check_bool("reference", reference)
     problem = SoaringProblem(model, sampler, cfg, start=start, t0=t0, airspeed_prev=airspeed_prev)
     params = SSTParams(
         selection_radius=cfg.selection_radius,
@@ -167,6 +171,25 @@ def make_planner(
     return problem, planner
 
 
+def as_sst_config(config: SoaringSSTConfig | Mapping[str, Any] | None) -> SoaringSSTConfig:
+    """A :class:`SoaringSSTConfig` from itself, a dict of its fields, or None (the defaults); unknown
+    keys and other types raise a :class:`ConfigError` with the allowed fields."""
+    if config is None:
+        return SoaringSSTConfig()
+    if isinstance(config, SoaringSSTConfig):
+        return config
+    names = [f.name for f in fields(SoaringSSTConfig)]
+    if isinstance(config, Mapping):
+        unknown = sorted(str(k) for k in config if k not in names)
+        if unknown:
+            raise ConfigError(f"config has unknown key(s) {unknown!r}; allowed: {', '.join(names)}")
+        return SoaringSSTConfig(**config)
+    raise ConfigError(
+        f"config={config!r} has type {type(config).__name__}; a SoaringSSTConfig, a dict of its fields "
+        f"({', '.join(names)}) or None is required"
+    )
+
+
 def plan_soaring(
     model: SoaringModel,
     sampler: str = "primitive",
@@ -174,7 +197,7 @@ def plan_soaring(
     time_limit: float | None = None,
     max_iterations: int | None = None,
     seed: int | None = 0,
-    config: SoaringSSTConfig | None = None,
+    config: SoaringSSTConfig | Mapping[str, Any] | None = None,
     start: np.ndarray | None = None,
     t0: float = 0.0,
     airspeed_prev: float | None = None,
@@ -188,7 +211,7 @@ def plan_soaring(
     :param time_limit: wall-clock budget [s].
     :param max_iterations: iteration budget (at least one budget is required).
     :param seed: planner seed (same seed, same budget in iterations -> same plan).
-    :param config: radii, distance weights, batch size.
+    :param config: radii, distance weights, batch size (a :class:`SoaringSSTConfig` or a dict of its fields).
     :param start: start state ``[Pn, Pe, chi, h]``; default the scenario's start.
     :param t0: start time [s].
     :param airspeed_prev: airspeed before the start [m/s] (None: the first edge pays no kinetic term).
@@ -208,6 +231,7 @@ def plan_soaring(
         airspeed_prev=airspeed_prev,
         reference=reference,
     )
+    check_bool("partial", partial)
     res = planner.run(time_limit=time_limit, max_iterations=max_iterations)
     if not res.solved and partial:
         tree = planner.tree()

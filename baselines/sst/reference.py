@@ -16,6 +16,7 @@ import numpy as np
 
 from baselines.sst import _kernels as K
 from baselines.sst.core import Problem, SSTError, SSTParams, SSTResult, SSTStats, TreeView, check_budget
+from soaring_env._validation import check_seed
 
 
 class ReferenceSST:
@@ -31,7 +32,7 @@ class ReferenceSST:
             raise SSTError(f"problem={problem!r} does not implement the Problem protocol")
         self.problem = problem
         self.params = params or SSTParams()
-        self.rng = np.random.default_rng(seed)
+        self.rng = np.random.default_rng(check_seed("seed", seed))
         sp = problem.space
         self.space = sp
         self._dims = list(sp.dims)

@@ -33,7 +33,7 @@ import numpy as np
 
 from baselines.sst.core import EDGE_GOAL, EDGE_INVALID, EDGE_VALID, Edges, SSTError, StateSpace
 from baselines.sst.samplers import BoxSampler, IndexSampler
-from soaring_env._validation import check_int, check_positive
+from soaring_env._validation import as_float_array, check_bool, check_finite, check_int, check_positive
 from soaring_env.model import FLYING, GOAL, SoaringModel
 from soaring_env.primitives import COL_AIRSPEED
 
@@ -72,8 +72,9 @@ class SoaringSSTConfig:
 
     def __post_init__(self) -> None:
         for name in ("selection_radius", "pruning_radius", "heading_scale", "height_scale"):
-            check_positive(name, getattr(self, name))
-        check_int("batch_size", self.batch_size, 1)
+            object.__setattr__(self, name, check_positive(name, getattr(self, name)))
+        check_int("batch_size", self.batch_size, 1, 1 << 20)
+        check_bool("mask_primitives", self.mask_primitives)
         if self.max_edges is not None:
             check_int("max_edges", self.max_edges, 1)
 
@@ -109,7 +110,7 @@ class SoaringProblem:
         self.config = config or SoaringSSTConfig()
         sc = model.scenario
         b = sc.bounds
-        x0 = sc.start_state if start is None else np.array(start, dtype=np.float64)
+        x0 = sc.start_state if start is None else np.array(as_float_array("start", start))
         if x0.shape != (4,) or not np.all(np.isfinite(x0)):
             raise SSTError(f"start={start!r} must be 4 finite numbers [Pn, Pe, chi, h]")
         if not bool(b.contains(x0[0], x0[1], x0[3])):
@@ -121,10 +122,11 @@ class SoaringProblem:
         g = sc.goal
         if bool(g.contains(x0[0], x0[1], x0[3])):
             raise SSTError("start lies inside the goal region; there is nothing to plan")
-        if not math.isfinite(t0):
-            raise SSTError(f"t0={t0!r} must be finite")
-        if airspeed_prev is not None and not (math.isfinite(airspeed_prev) and airspeed_prev > 0):
-            raise SSTError(f"airspeed_prev={airspeed_prev!r} must be None or > 0 m/s")
+        t0 = check_finite("t0", t0)
+        if airspeed_prev is not None:
+            airspeed_prev = check_finite("airspeed_prev", airspeed_prev)
+            if not airspeed_prev > 0:
+                raise SSTError(f"airspeed_prev={airspeed_prev!r} must be None or > 0 m/s")
         check_goal_reachable(model)
         self._root = np.array([*x0, t0, np.nan if airspeed_prev is None else airspeed_prev])
         cfg = self.config

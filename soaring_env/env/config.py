@@ -14,9 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from soaring_env._validation import ConfigError, check_finite, check_int, check_positive, check_range
+from soaring_env._validation import ConfigError, check_bool, check_finite, check_int, check_positive, check_range
 from soaring_env.physics.aircraft import Aircraft
-from soaring_env.primitives import DEFAULT_MAX_SUBSTEP
+from soaring_env.primitives import DEFAULT_MAX_SUBSTEP, MAX_POINTS, check_duration, check_substep
 from soaring_env.scenario import SCENARIOS, Scenario, get_scenario, make_scenario
 
 #: Reward scale: one reward unit is one kJ/kg of specific energy.
@@ -101,19 +101,21 @@ class SoaringEnvConfig:
             raise ConfigError(f"random_scenario has unknown key(s) {unknown!r}; allowed: {', '.join(allowed)}")
         if self.scenario == RANDOM or self.random_scenario:
             make_scenario(np.random.default_rng(0), **dict(self.random_scenario))  # fail early on bad ranges
-        check_positive("duration", self.duration)
-        check_int("n_points", self.n_points, 2)
+        object.__setattr__(self, "duration", check_duration("duration", self.duration))
+        check_int("n_points", self.n_points, 2, MAX_POINTS)
         if not isinstance(self.aircraft, Aircraft):
             raise ConfigError(f"aircraft={self.aircraft!r} must be an Aircraft")
-        check_positive("max_substep", self.max_substep)
-        check_range("max_bank_deg", self.max_bank_deg, 0.0, 90.0, low_open=True, high_open=True)
-        if not isinstance(self.observe_thermals, bool):
-            raise ConfigError(f"observe_thermals={self.observe_thermals!r} must be a bool")
-        check_int("n_obs_thermals", self.n_obs_thermals, 0)
+        object.__setattr__(self, "max_substep", check_substep("max_substep", self.max_substep))
+        bank = check_range("max_bank_deg", self.max_bank_deg, 0.0, 90.0, low_open=True, high_open=True)
+        object.__setattr__(self, "max_bank_deg", bank)
+        check_bool("observe_thermals", self.observe_thermals)
+        check_int("n_obs_thermals", self.n_obs_thermals, 0, 64)
         for name in ("position_scale", "height_scale", "updraft_scale", "speed_scale", "wind_scale"):
-            check_positive(name, getattr(self, name))
+            object.__setattr__(self, name, check_positive(name, getattr(self, name)))
         for name in ("goal_bonus", "crash_penalty", "out_of_bounds_penalty", "progress_weight"):
-            check_finite(name, getattr(self, name))
+            object.__setattr__(self, name, check_finite(name, getattr(self, name)))
+        if isinstance(self.render_size, (str, bytes)) or not hasattr(self.render_size, "__iter__"):
+            raise ConfigError(f"render_size={self.render_size!r} must be (width, height) in pixels, each >= 64")
         size = tuple(self.render_size)
         if len(size) != 2 or any(isinstance(s, bool) or not isinstance(s, int) or s < 64 for s in size):
             raise ConfigError(f"render_size={self.render_size!r} must be (width, height) in pixels, each >= 64")

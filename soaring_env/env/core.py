@@ -8,6 +8,7 @@ it (goal / crash / out of bounds / flying) and charges the full edge cost.
 from __future__ import annotations
 
 import math
+from collections import deque
 from typing import Any, ClassVar, SupportsFloat
 
 import gymnasium as gym
@@ -25,6 +26,9 @@ from soaring_env.scenario import Scenario, get_scenario
 
 #: Progress shaping is counted per km of distance to the goal centre.
 PROGRESS_SCALE = 1000.0
+#: The raw env keeps the flown points and traces (``path``, ``history``) of the last this many
+#: edges only, so that an episode without a time limit cannot grow memory without bound.
+MAX_PATH_EDGES = 10_000
 _ZERO_ROW = np.zeros(1, dtype=np.int64)
 
 
@@ -226,7 +230,8 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
 
     @property
     def path(self) -> np.ndarray:
-        """Every flown point of the episode so far, (M, 4) ``[Pn, Pe, chi, h]``, start included."""
+        """Every flown point of the episode so far, (M, 4) ``[Pn, Pe, chi, h]``, start included (of
+        the last ``MAX_PATH_EDGES`` edges only, on longer episodes)."""
         return np.concatenate(self._path, axis=0)
 
     def _make_action_space(self) -> spaces.Space:
@@ -293,12 +298,15 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         )
         self._d_goal = float(self._dist[0])
         self.updraft = float(self._upd[0])
-        self._path: list[np.ndarray] = [self.state[None, :].copy()]
-        self.history: dict[str, list[float]] = {
-            "time": [0.0],
-            "height": [float(self.state[3])],
-            "energy_spent": [0.0],
-            "updraft": [self.updraft],
+        self._path: deque[np.ndarray] = deque([self.state[None, :].copy()], maxlen=MAX_PATH_EDGES + 1)
+        self.history: dict[str, deque[float]] = {
+            key: deque([v], maxlen=MAX_PATH_EDGES + 1)
+            for key, v in (
+                ("time", 0.0),
+                ("height", float(self.state[3])),
+                ("energy_spent", 0.0),
+                ("updraft", self.updraft),
+            )
         }
         info = {
             "energy_spent": 0.0,
@@ -327,7 +335,7 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
     def _advance(self, ctrl: np.ndarray, primitive: int | None) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if self._needs_reset:
             raise RuntimeError(
-                "step() called before reset() or after the episode ended (terminated); call reset() first"
+                "step() called before reset() or after the episode ended (terminated or truncated); call reset() first"
             )
         x0 = self._x0  # a writable buffer: see primitives.Propagator
         x0[0, :] = self.state

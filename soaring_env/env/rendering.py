@@ -8,6 +8,7 @@ backend is interactive and silently draws off-screen otherwise.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -283,7 +284,7 @@ class Renderer:
         ax.view_init(elev=22, azim=-125)
         ax.set_title(f"3-D view (height x{exaggeration:.0f}; shadow dashed)", fontsize=9)
 
-    def _height_trace(self, ax: Any, env: SoaringBaseEnv, hist: dict[str, list[float]]) -> None:
+    def _height_trace(self, ax: Any, env: SoaringBaseEnv, hist: Mapping[str, Sequence[float]]) -> None:
         t = np.asarray(hist["time"]) / 60.0
         ax.plot(t, hist["height"], marker="o", ms=3, color="#1f3b73", label="height")
         g = env.scenario.goal
@@ -297,7 +298,7 @@ class Renderer:
         ax.grid(alpha=0.3)
         ax.set_title("height", fontsize=9)
 
-    def _updraft_trace(self, ax: Any, hist: dict[str, list[float]]) -> None:
+    def _updraft_trace(self, ax: Any, hist: Mapping[str, Sequence[float]]) -> None:
         t = np.asarray(hist["time"]) / 60.0
         w = np.asarray(hist["updraft"])
         ax.axhline(0.0, color="0.5", lw=0.8)
@@ -311,7 +312,7 @@ class Renderer:
         ax.grid(alpha=0.3)
         ax.set_title("updraft at the aircraft", fontsize=9)
 
-    def _energy_trace(self, ax: Any, hist: dict[str, list[float]]) -> None:
+    def _energy_trace(self, ax: Any, hist: Mapping[str, Sequence[float]]) -> None:
         t = np.asarray(hist["time"]) / 60.0
         e = np.asarray(hist["energy_spent"]) / 1e3
         ax.axhline(0.0, color="0.5", lw=0.8)

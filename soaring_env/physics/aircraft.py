@@ -21,8 +21,8 @@ import numpy as np
 from numba import njit
 
 from soaring_env._jit import FASTMATH as _FM
-from soaring_env._validation import ConfigError, check_choice, check_positive, check_range
-from soaring_env.physics.atmosphere import G, _density
+from soaring_env._validation import ConfigError, check_choice, check_positive, check_range, check_type
+from soaring_env.physics.atmosphere import MAX_HEIGHT, G, _density
 
 THRUST_MODELS = ("trim", "paper")
 
@@ -59,11 +59,12 @@ class Aircraft:
 
     def __post_init__(self) -> None:
         for name in ("mass", "wing_area", "aspect_ratio", "oswald", "cl0", "stall_speed"):
-            check_positive(name, getattr(self, name))
+            object.__setattr__(self, name, check_positive(name, getattr(self, name)))
         check_range("oswald", self.oswald, 0.0, 1.0, low_open=True)
-        check_range("cd0", self.cd0, 0.0, 1.0)
-        check_range("eta_ec", self.eta_ec, 0.0, 1.0, low_open=True)
-        check_range("eta_p", self.eta_p, 0.0, 1.0, low_open=True)
+        object.__setattr__(self, "cd0", check_range("cd0", self.cd0, 0.0, 1.0))
+        object.__setattr__(self, "eta_ec", check_range("eta_ec", self.eta_ec, 0.0, 1.0, low_open=True))
+        object.__setattr__(self, "eta_p", check_range("eta_p", self.eta_p, 0.0, 1.0, low_open=True))
+        check_type("thrust_model", self.thrust_model, str)
         check_choice("thrust_model", self.thrust_model, THRUST_MODELS)
 
     @property
@@ -102,7 +103,7 @@ class Aircraft:
             ("airspeed", v, v > 0.0),
             ("gamma", g_, np.abs(g_) < math.pi / 2),
             ("bank", p, np.abs(p) < math.pi / 2),
-            ("height", h, h < 11000.0),
+            ("height", h, h < MAX_HEIGHT),
         ):
             if not np.all(ok & np.isfinite(arr)):
                 raise ConfigError(

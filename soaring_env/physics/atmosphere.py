@@ -15,6 +15,8 @@ T0 = 288.15
 LAPSE = 0.0065
 #: ISA troposphere density exponent g / (R L) - 1 with R = 287.053 J/(kg K).
 ISA_EXPONENT = 4.2559
+#: Top of the ISA troposphere [m]: the density formula (and so the whole energy model) holds below it.
+MAX_HEIGHT = 11000.0
 
 
 @njit(cache=True, inline="always", fastmath=_FM)
@@ -61,8 +63,8 @@ def air_density(height: np.ndarray | float) -> np.ndarray:
     :param height: geometric height above mean sea level [m], valid below 11 km.
     """
     h = np.asarray(height, dtype=np.float64)
-    if np.any(h >= 11000.0) or not np.all(np.isfinite(h)):
-        raise ValueError(f"height={height!r} must be finite and below 11000 m (ISA troposphere)")
+    if np.any(h >= MAX_HEIGHT) or not np.all(np.isfinite(h)):
+        raise ValueError(f"height={height!r} must be finite and below {MAX_HEIGHT:g} m (ISA troposphere)")
     out = np.empty_like(h)
     _density_many(h, out)
     return out

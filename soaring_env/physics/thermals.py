@@ -15,7 +15,8 @@ import numpy as np
 from numba import njit
 
 from soaring_env._jit import FASTMATH as _FM
-from soaring_env._validation import ConfigError, check_choice, check_finite, check_positive
+from soaring_env._validation import ConfigError, check_bool, check_choice, check_finite, check_positive, check_type
+from soaring_env.physics.atmosphere import MAX_HEIGHT
 
 THERMAL_MODELS = ("allen", "gaussian")
 _ALLEN, _GAUSSIAN = 0, 1
@@ -54,10 +55,11 @@ class Thermal:
     radius: float = 80.0
 
     def __post_init__(self) -> None:
-        check_finite("thermal.north", self.north)
-        check_finite("thermal.east", self.east)
-        check_positive("thermal.strength", self.strength)
-        check_positive("thermal.radius", self.radius)
+        # stored as floats: a value given as a numpy scalar or int must not reach the kernels' packing as such
+        object.__setattr__(self, "north", check_finite("thermal.north", self.north))
+        object.__setattr__(self, "east", check_finite("thermal.east", self.east))
+        object.__setattr__(self, "strength", check_positive("thermal.strength", self.strength))
+        object.__setattr__(self, "radius", check_positive("thermal.radius", self.radius))
 
 
 @dataclass(frozen=True)
@@ -79,23 +81,32 @@ class WindField:
     wind_east: float = 0.0
     drift: bool = False
     _packed: np.ndarray = field(init=False, repr=False, compare=False)
+    #: an upper bound on the updraft anywhere [m/s]: Allen 1.2 max w* (its peak stays below 1.1 w*),
+    #: Gaussian the sum of the peaks (overlapping thermals add up).
+    updraft_bound: float = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
+        if isinstance(self.thermals, (str, bytes, Thermal)) or not hasattr(self.thermals, "__iter__"):
+            raise ConfigError(f"thermals={self.thermals!r} must be a sequence of Thermal")
         object.__setattr__(self, "thermals", tuple(self.thermals))
         for i, th in enumerate(self.thermals):
             if not isinstance(th, Thermal):
                 raise ConfigError(f"thermals[{i}]={th!r} must be a Thermal")
+        check_type("model", self.model, str)
         check_choice("model", self.model, THERMAL_MODELS)
-        check_positive("zi", self.zi)
-        check_finite("wind_north", self.wind_north)
-        check_finite("wind_east", self.wind_east)
-        if not isinstance(self.drift, (bool, np.bool_)):
-            raise ConfigError(f"drift={self.drift!r} must be a bool")
+        object.__setattr__(self, "zi", check_positive("zi", self.zi))
+        if self.zi >= MAX_HEIGHT:
+            raise ConfigError(f"zi={self.zi!r} is outside the model's range; allowed: 0 < zi < {MAX_HEIGHT:g} m")
+        object.__setattr__(self, "wind_north", check_finite("wind_north", self.wind_north))
+        object.__setattr__(self, "wind_east", check_finite("wind_east", self.wind_east))
+        object.__setattr__(self, "drift", check_bool("drift", self.drift))
         allen = self.model == "allen"
         rows = [[t.north, t.east, t.strength, self._influence(t) if allen else t.radius] for t in self.thermals]
         packed = np.array(rows, dtype=np.float64).reshape(-1, 4)
         packed.setflags(write=False)
         object.__setattr__(self, "_packed", packed)
+        w = packed[:, 2]
+        object.__setattr__(self, "updraft_bound", float(1.2 * w.max() if allen else w.sum()) if w.size else 0.0)
 
     def _influence(self, t: Thermal) -> float:
         if self.model == "allen":
