@@ -39,6 +39,7 @@ import gymnasium as gym
 import numpy as np
 
 from baselines._runs import holds_dir_lock, read_json
+from baselines.reference.yardstick import ScenarioReference
 from soaring_env._validation import ConfigError
 from soaring_env.scenario import SCENARIOS, Scenario, atomic_write_text, get_scenario, make_scenario
 
@@ -263,6 +264,33 @@ def run_episode(env: gym.Env, agent: Any, scenario: Scenario, seed: int, keep_pa
     }
 
 
+def action_set(env_id: str) -> str:
+    """The reference action set of an env id: ``"primitive"`` (Discrete(174)) or ``"continuous"``."""
+    return "primitive" if env_id == DISCRETE_ID else "continuous"
+
+
+def episode_regret(ep: Mapping[str, Any], references: Mapping[str, ScenarioReference]) -> float | None:
+    """Regret of a successful episode against its scenario's reference for its action set (None:
+    a failure, no reference for the scenario, or a scenario where the thermals offer nothing)."""
+    ref = references.get(ep["scenario"])
+    if ref is None or not ep["success"]:
+        return None
+    r = ref.regret(float(ep["energy_spent"]), action_set(ep["env_id"]))
+    return None if math.isnan(r) else r
+
+
+def attach_regret(results: dict[str, Any], references: Mapping[str, ScenarioReference]) -> dict[str, Any]:
+    """Set ``regret`` on every episode of ``results`` (in place) and record which reference was used."""
+    for ep in results["episodes"]:
+        ep["regret"] = episode_regret(ep, references)
+    results["meta"]["reference"] = {
+        name: {s: {"best_cost": r.best_cost, "direct_cost": r.direct_cost} for s, r in ref.samplers.items()}
+        for name, ref in references.items()
+        if name in results["meta"].get("scenarios", {})
+    }
+    return results
+
+
 def _key(agent: str, scenario: str, seed: int) -> str:
     return f"{agent}|{scenario}|{seed}"
 
@@ -285,10 +313,13 @@ def run_evaluation(
     resume: bool = True,
     progress: bool = False,
     log: Callable[[str], None] | None = None,
+    references: Mapping[str, ScenarioReference] | None = None,
 ) -> dict[str, Any]:
     """Run every (agent, scenario, seed) of ``config``; write ``results.json`` after each episode.
 
     :param resume: reuse episodes already in ``out_dir/results.json`` whose agent settings match.
+    :param references: the reference per scenario name (:func:`baselines.reference.load_references`);
+        every episode record gets its ``regret`` against it (None where it has none).
     :param progress: show a tqdm progress bar.
     :param log: called with one line per episode (e.g. ``print``; through tqdm while ``progress``).
     :returns: the results dict (also on disk).
@@ -341,8 +372,10 @@ def run_evaluation(
                 meta["agent_envs"].setdefault(ep["agent"], old["meta"].get("agent_envs", {}).get(ep["agent"]))
                 meta["scenarios"].setdefault(ep["scenario"], old["meta"]["scenarios"].get(ep["scenario"]))
 
+    refs = references or {}
+
     def save() -> None:
-        data = {"schema": SCHEMA, "meta": meta, "episodes": episodes}
+        data = attach_regret({"schema": SCHEMA, "meta": meta, "episodes": episodes}, refs)
         atomic_write_text(res_path, json.dumps(data, separators=(",", ":")))
 
     bar = None
@@ -386,7 +419,7 @@ def run_evaluation(
         if bar is not None:
             bar.close()
     save()
-    return {"schema": SCHEMA, "meta": meta, "episodes": episodes}
+    return attach_regret({"schema": SCHEMA, "meta": meta, "episodes": episodes}, refs)
 
 
 def _jsonable(x: Any) -> Any:
@@ -412,6 +445,19 @@ def _stats(values: Iterable[float]) -> tuple[float, float, int]:
     return float(v.mean()), float(v.std(ddof=1)) if v.size > 1 else 0.0, int(v.size)
 
 
+def bootstrap_ci(
+    values: Sequence[float], stat: Callable[[np.ndarray], float], n_boot: int = 2000, seed: int = 0
+) -> tuple[float, float, float]:
+    """``stat(values)`` and its percentile-bootstrap 95 % interval (seeded: deterministic); NaNs if empty."""
+    v = np.asarray(values, dtype=np.float64)
+    if v.size == 0:
+        return math.nan, math.nan, math.nan
+    rng = np.random.default_rng(seed)
+    boots = np.array([stat(v[rng.integers(0, v.size, v.size)]) for _ in range(n_boot)])
+    lo, hi = np.percentile(boots, [2.5, 97.5])
+    return float(stat(v)), float(lo), float(hi)
+
+
 def summarize(results: Mapping[str, Any], reference: str = REFERENCE_AGENT) -> list[dict[str, Any]]:
     """Per agent: success rate, energy [J/kg] over its successes and over the (scenario, seed)
     pairs that it and ``reference`` both solve (with the ratio of those means), flight time [s]
@@ -429,6 +475,7 @@ def summarize(results: Mapping[str, Any], reference: str = REFERENCE_AGENT) -> l
         c_mine, _, n_common = _stats(e["energy_spent"] for e, _ in common)
         c_ref, _, _ = _stats(r["energy_spent"] for _, r in common)
         t_mean, t_std, _ = _stats(e["flight_time"] for e in ok)
+        reg = [e["regret"] for e in ok if e.get("regret") is not None]
         rows.append(
             {
                 "agent": a,
@@ -446,6 +493,9 @@ def summarize(results: Mapping[str, Any], reference: str = REFERENCE_AGENT) -> l
                 "decisions_mean": _stats(e["decisions"] for e in mine)[0],
                 "compute_per_decision_s": _stats(e["compute_per_decision_s"] for e in mine)[0],
                 "compute_total_s": _stats(e["compute_total_s"] for e in mine)[0],
+                "regret_n": len(reg),
+                "regret_median": bootstrap_ci(reg, np.median),
+                "regret_mean": bootstrap_ci(reg, np.mean),
             }
         )
     return rows
@@ -455,13 +505,18 @@ def _f(x: float, fmt: str) -> str:
     return "–" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, fmt)
 
 
+def _ci(t: tuple[float, float, float]) -> str:
+    return "–" if math.isnan(t[0]) else f"{t[0]:.2f} [{t[1]:.2f}, {t[2]:.2f}]"
+
+
 def markdown_table(results: Mapping[str, Any], reference: str = REFERENCE_AGENT) -> str:
     """The summary as a GitHub markdown table (energies in kJ/kg)."""
     rows = summarize(results, reference)
     head = (
         "| agent | success | energy, successes [kJ/kg] | energy on common successes [kJ/kg] "
-        f"| × {reference} | flight time [s] | compute / decision [ms] | compute / episode [s] |\n"
-        "|---|---:|---:|---:|---:|---:|---:|---:|\n"
+        f"| × {reference} | regret, median [95 % CI] | regret, mean [95 % CI] | thermal benefit captured (median) "
+        "| flight time [s] | compute / decision [ms] | compute / episode [s] |\n"
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n"
     )
     lines = []
     for r in rows:
@@ -470,6 +525,8 @@ def markdown_table(results: Mapping[str, Any], reference: str = REFERENCE_AGENT)
             f"| {_f(r['energy_mean'] / 1000, '.2f')} ± {_f(r['energy_std'] / 1000, '.2f')} "
             f"| {_f(r['energy_common'] / 1000, '.2f')} vs {_f(r['energy_common_ref'] / 1000, '.2f')} (n={r['common']}) "
             f"| {_f(r['energy_ratio'], '.2f')} "
+            f"| {_ci(r['regret_median'])} | {_ci(r['regret_mean'])} "
+            f"| {_f(100 * (1 - r['regret_median'][0]), '.0f')} % "
             f"| {_f(r['flight_time_mean'], '.0f')} ± {_f(r['flight_time_std'], '.0f')} "
             f"| {_f(1000 * r['compute_per_decision_s'], '.3g')} | {_f(r['compute_total_s'], '.3g')} |"
         )
@@ -488,7 +545,10 @@ def write_report(results: Mapping[str, Any], out_dir: str | Path, reference: str
         f"{cfg.get('sst_time_budget')} s / {cfg.get('sst_iterations')} iterations; machine: {meta.get('machine')}.\n"
         "Energy = net specific energy spent (fuel + potential + kinetic) [kJ/kg], mean ± sd over successful "
         f"episodes; 'common' = (scenario, seed) pairs solved by both the agent and {reference}, "
-        "× = ratio of those means. SST knows the thermal field; compute time includes SST's planning.\n"
+        "× = ratio of those means. Regret r = (E - E_best) / (E_direct - E_best) per successful episode against "
+        "the reference search of its scenario and action set (results/reference/; 0 = best known plan, "
+        "1 = no better than ignoring the thermals); thermal benefit captured = 1 - r. SST knows the thermal "
+        "field; compute time includes SST's planning.\n"
     )
     files = [out / TABLE_FILE]
     atomic_write_text(files[0], text)

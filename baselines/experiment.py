@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from baselines._runs import holds_dir_lock, watch_parent
+from baselines.reference.yardstick import ScenarioReference
 from baselines.sst.core import SSTError
 from baselines.sst.soaring import SAMPLERS, SoaringSSTConfig
 from soaring_env.scenario import Scenario, atomic_write_text, get_scenario
@@ -228,8 +229,12 @@ def _mean_std(xs: Iterable[float]) -> tuple[float, float]:
     return float(a.mean()), float(a.std(ddof=1)) if a.size > 1 else 0.0
 
 
-def summarize(records: list[dict[str, Any]], planners: Iterable[str] = PLANNERS) -> dict[str, dict[str, Any]]:
-    """Per planner: runs, failures, and mean/std of iterations, active nodes, cost, flight time."""
+def summarize(
+    records: list[dict[str, Any]], planners: Iterable[str] = PLANNERS, reference: ScenarioReference | None = None
+) -> dict[str, dict[str, Any]]:
+    """Per planner: runs, failures, and mean/std of iterations, active nodes, cost, flight time;
+    with a ``reference`` (of the experiment's scenario) also the median and mean regret of the
+    solved runs and the reference's best and direct cost for the planner's action set."""
     out: dict[str, dict[str, Any]] = {}
     for p in planners:
         recs = [r for r in records if r["planner"] == p]
@@ -242,6 +247,12 @@ def summarize(records: list[dict[str, Any]], planners: Iterable[str] = PLANNERS)
         s["flight_time"] = _mean_std(r["flight_time"] for r in solved)
         s["time_to_first_solution"] = _mean_std(r["time_to_first_solution"] for r in solved)
         s["cost_median"] = float(np.median([r["cost"] for r in solved])) if solved else math.nan
+        ref = reference.samplers.get(p) if reference is not None else None
+        if ref is not None:
+            reg = [ref.regret(r["cost"]) for r in solved]
+            s["regret_median"] = float(np.median(reg)) if reg else math.nan
+            s["regret"] = _mean_std(reg)
+            s["reference"] = {"best_cost": ref.best_cost, "direct_cost": ref.direct_cost}
         out[p] = s
     return out
 
@@ -304,6 +315,19 @@ def format_table(summary: dict[str, dict[str, Any]], time_limit: float) -> str:
         f"| time to first solution [s] | - | - | {ours(prim, 'time_to_first_solution')} "
         f"| {ours(cont, 'time_to_first_solution')} |"
     )
+    if any(s is not None and "regret" in s for s in (prim, cont)):
+
+        def reg(s: dict[str, Any] | None) -> str:
+            if s is None or "regret" not in s:
+                return "-"
+            ref = s["reference"]
+            return (
+                f"median {s['regret_median']:.2f}, mean {_pm(s['regret'])} (best {ref['best_cost']:,.0f}, "
+                f"direct {ref['direct_cost']:,.0f} J/kg)"
+            )
+
+        rows.append(f"| regret vs the reference search (0 = best known, 1 = ignoring the thermals) | - | - "
+                    f"| {reg(prim)} | {reg(cont)} |")  # fmt: skip
     return "\n".join(rows)
 
 
@@ -423,9 +447,12 @@ def make_figures(
     return paths
 
 
-def write_report(cfg: ExperimentConfig, records: list[dict[str, Any]]) -> tuple[str, Path]:
-    """Write ``summary.json`` and ``table.md`` to ``cfg.out_dir``; returns the table text and its path."""
-    summary = summarize(records, cfg.planners)
+def write_report(
+    cfg: ExperimentConfig, records: list[dict[str, Any]], reference: ScenarioReference | None = None
+) -> tuple[str, Path]:
+    """Write ``summary.json`` and ``table.md`` to ``cfg.out_dir``; returns the table text and its path.
+    ``reference``: the reference of the experiment's scenario, for the regret row."""
+    summary = summarize(records, cfg.planners, reference)
     table = format_table(summary, cfg.time_limit)
     atomic_write_text(cfg.out_dir / "summary.json", json.dumps(summary, indent=2, default=str))
     path = cfg.out_dir / "table.md"

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from baselines.reference import load_reference
 from baselines.sst.plan import make_planner
 from baselines.sst.soaring import SAMPLERS, SoaringSSTConfig
 from soaring_env.model import SoaringModel
@@ -87,11 +88,24 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--samplers", nargs="+", default=list(SAMPLERS), choices=SAMPLERS)
     ap.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
     ap.add_argument("--out", type=Path, default=Path("results/bench_sst.json"), help="JSON output file")
+    ap.add_argument(
+        "--reference", type=Path, default=Path("results/reference/paper.json"), help="reference file (regret)"
+    )
     args = ap.parse_args(argv)
     if args.seeds < 1 or not args.time > 0:
         ap.error(f"--seeds={args.seeds} must be >= 1 and --time={args.time} > 0")
 
     model = SoaringModel(scenario=get_scenario("paper"))
+    reference = load_reference(args.reference) if args.reference.is_file() else None
+    if reference is None:
+        print(f"note: no reference at {args.reference}; regret columns stay empty (scripts/reference.py)")
+
+    def regret(cost: float | None, sampler: str) -> float | None:
+        if reference is None or cost is None or not math.isfinite(cost):
+            return None
+        r = reference.regret(cost, sampler)
+        return None if math.isnan(r) else r
+
     base = SoaringSSTConfig()
     print(
         f"SST benchmark, paper scenario, {args.seeds} seeds x {args.time:g} s per row, one core "
@@ -104,6 +118,8 @@ def main(argv: list[str] | None = None) -> int:
         for variant in args.variants:
             for seed in range(args.seeds):
                 r = bench_one(model, sampler, variant, seed, args.time, base)
+                for k in ("1", "5", "T"):
+                    r[f"regret_{k}"] = regret(r[f"cost_{k}"], sampler)
                 rows.append(r)
                 print(
                     f"  {sampler:10s} {variant:13s} seed {seed}: {r['it_per_s']:,.0f} it/s "
@@ -114,8 +130,8 @@ def main(argv: list[str] | None = None) -> int:
     t = args.time
     lines = [
         f"| sampler | implementation | it/s (wall) | it/s (CPU) | first solution [s] | cost @1 s | cost @5 s "
-        f"| cost @{t:g} s [J/kg] | solved |",
-        "|---|---|---|---|---|---|---|---|---|",
+        f"| cost @{t:g} s [J/kg] | regret @1 s | @5 s | @{t:g} s | solved |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for sampler in args.samplers:
         for variant in args.variants:
@@ -125,9 +141,15 @@ def main(argv: list[str] | None = None) -> int:
                 f"| {_fmt(_med([r['it_per_cpu_s'] for r in rs]))} "
                 f"| {_fmt(_med([r['ttfs'] for r in rs]), '{:.3f}')} "
                 f"| {_fmt(_med([r['cost_1'] for r in rs]))} | {_fmt(_med([r['cost_5'] for r in rs]))} "
-                f"| {_fmt(_med([r['cost_T'] for r in rs]))} | {sum(r['solved'] for r in rs)}/{len(rs)} |"
+                f"| {_fmt(_med([r['cost_T'] for r in rs]))} "
+                + "".join(f"| {_fmt(_med([r[f'regret_{k}'] for r in rs]), '{:.2f}')} " for k in ("1", "5", "T"))
+                + f"| {sum(r['solved'] for r in rs)}/{len(rs)} |"
             )
     table = "\n".join(lines)
+    if reference is not None:
+        table += "\n\n" + " ".join(
+            f"{k}: best {v.best_cost:,.0f}, direct {v.direct_cost:,.0f} J/kg;" for k, v in reference.samplers.items()
+        ) + " regret = (cost - best) / (direct - best), median over the seeds."
     print()
     print(table)
     prim = [r for r in rows if r["sampler"] == "primitive" and r["variant"] == "batched"]

@@ -18,6 +18,7 @@ Writes ``<out>/results.json`` (atomically after every episode; a rerun resumes),
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -26,14 +27,17 @@ from baselines.evaluation import (
     AGENT_NAMES,
     PPO_AGENTS,
     EvalConfig,
+    attach_regret,
     heldout_names,
+    load_results,
     markdown_table,
     ppo_model_path,
     run_evaluation,
     write_report,
 )
+from baselines.reference import load_references
 from soaring_env._validation import ConfigError
-from soaring_env.scenario import SCENARIOS
+from soaring_env.scenario import SCENARIOS, atomic_write_text
 
 
 def _budget(text: str) -> float | None:
@@ -57,6 +61,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--quiet", action="store_true", help="no per-episode lines, no progress bar")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (per-episode lines stay)")
     p.add_argument("--list", action="store_true", help="list known agents and scenarios and exit")
+    p.add_argument(
+        "--reference-dir", default="results/reference", help="reference files for regret (scripts/reference.py)"
+    )
+    p.add_argument(
+        "--rescore", action="store_true", help="run no episode: recompute the regrets of --out's results and report"
+    )
     args = p.parse_args(argv)
     check_cli_args(p, args, counts=("heldout",), seeds=("seeds",), dirs=("out",))
 
@@ -80,6 +90,16 @@ def main(argv: list[str] | None = None) -> int:
         agents = args.agents
     scenarios = args.scenarios if args.scenarios is not None else ["paper", *heldout_names(args.heldout)]
     try:
+        references = load_references(args.reference_dir)
+        if args.rescore:
+            results = attach_regret(load_results(args.out), references)
+            atomic_write_text(Path(args.out) / "results.json", json.dumps(results, separators=(",", ":")))
+            files = write_report(results, args.out)
+            print(markdown_table(results))
+            print("rescored:", ", ".join(str(f) for f in [Path(args.out) / "results.json", *files]))
+            return 0
+        if not references:
+            print(f"note: no reference files in {args.reference_dir}; regret stays empty (scripts/reference.py)")
         cfg = EvalConfig(
             agents=tuple(agents),
             scenarios=tuple(scenarios),
@@ -95,8 +115,9 @@ def main(argv: list[str] | None = None) -> int:
             resume=not args.fresh,
             progress=not (args.quiet or args.no_progress),
             log=None if args.quiet else lambda line: print(line, flush=True),
+            references=references,
         )
-    except ConfigError as exc:
+    except (ConfigError, FileNotFoundError) as exc:
         p.print_usage(sys.stderr)  # argparse's usual usage + "error:" lines; status 2 as returned value
         print(f"{p.prog}: error: {exc}", file=sys.stderr)
         return 2

@@ -19,6 +19,7 @@ from pathlib import Path
 
 from baselines._runs import check_cli_args
 from baselines.experiment import ExperimentConfig, make_figures, run_experiment, write_report
+from baselines.reference import load_reference, reference_path
 from baselines.sst.core import SSTError
 from baselines.sst.soaring import SoaringSSTConfig
 
@@ -34,6 +35,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fresh", action="store_true", help="ignore existing results and run everything again")
     ap.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
+    ap.add_argument("--reference-dir", type=Path, default=Path("results/reference"), help="reference files (regret)")
     ap.add_argument("--selection-radius", type=float, default=SoaringSSTConfig.selection_radius, help="delta_BN [m]")
     ap.add_argument("--pruning-radius", type=float, default=SoaringSSTConfig.pruning_radius, help="delta_s [m]")
     ap.add_argument("--batch-size", type=int, default=SoaringSSTConfig.batch_size, help="expansions per round")
@@ -64,7 +66,14 @@ def main(argv: list[str] | None = None) -> int:
         records = run_experiment(cfg, progress=not args.no_progress, fresh=args.fresh)
     except SSTError as exc:  # e.g. the output folder is in use by another run
         ap.error(str(exc))
-    table, path = write_report(cfg, records)
+    ref_file = reference_path(args.reference_dir, cfg.scenario.name)
+    reference = load_reference(ref_file) if ref_file.is_file() else None
+    if reference is None:
+        print(f"note: no reference at {ref_file}; the table has no regret row (scripts/reference.py)")
+    elif reference.scenario != cfg.scenario:
+        print(f"note: {ref_file} is for another scenario; the table has no regret row")
+        reference = None
+    table, path = write_report(cfg, records, reference)
     print()
     print(table)
     print(f"\ntable: {path}")

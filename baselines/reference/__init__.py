@@ -1,6 +1,6 @@
 """The optimality yardstick: a deterministic reference search over the model, bounds and regret.
 
-* :mod:`baselines.reference.search` -- the beam search with cell dominance over control sequences
+* :mod:`baselines.reference.beam` -- the beam search with cell dominance over control sequences
   (primitives or a continuous control grid) that returns the same :class:`~baselines.sst.plan.Plan`
   as SST.
 * :mod:`baselines.reference.bounds` -- the hard lower bound, the model without thermals, regret.
@@ -8,8 +8,8 @@
   plan per action set) and its JSON files under ``results/reference/``.
 """
 
+from baselines.reference.beam import ReferenceConfig, SearchResult, control_set, glide_angle, search
 from baselines.reference.bounds import MIN_GAP, height_cap, lower_bound, regret, without_thermals
-from baselines.reference.search import ReferenceConfig, SearchResult, control_set, glide_angle, search
 from baselines.reference.yardstick import (
     SamplerReference,
     ScenarioReference,

@@ -22,6 +22,8 @@ from soaring_env.physics.atmosphere import G
 
 #: Below this gap between the direct and the best cost [J/kg] (2.5 m of height) regret is undefined.
 MIN_GAP = 25.0
+
+
 def height_cap(model: SoaringModel) -> float:
     """Highest height [m] a plan can end at, for the bound (module docstring)."""
     sc = model.scenario

@@ -24,8 +24,8 @@ from typing import Any
 
 import numpy as np
 
+from baselines.reference.beam import ReferenceConfig, SearchResult, search
 from baselines.reference.bounds import MIN_GAP, lower_bound, regret, without_thermals
-from baselines.reference.search import ReferenceConfig, SearchResult, search
 from baselines.sst.soaring import SAMPLERS
 from soaring_env._validation import ConfigError, check_choice
 from soaring_env.model import SoaringModel
@@ -150,13 +150,13 @@ def compute_reference(
         check_choice("sampler", sampler, SAMPLERS)
         t0 = time.perf_counter()
 
-        def cb(stage: str) -> Callable[[int, int], None] | None:
+        def cb(stage: str, sampler: str = sampler) -> Callable[[int, int], None] | None:
             if progress is None:
                 return None
             return lambda d, n: progress(f"{sampler}/{stage}", d, n)
 
         direct = search(direct_model, sampler, cfg, progress=cb("direct"))
-        seed = _core_controls(direct) if direct.plan.solved else None
+        seed = [_core_controls(direct)] if direct.plan.solved else []
         best = search(model, sampler, cfg, seed_controls=seed, progress=cb("thermals"))
         out[sampler] = SamplerReference(
             best_cost=best.cost,

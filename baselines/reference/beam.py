@@ -15,8 +15,8 @@ The search, depth by depth (one depth = one env step of Ts):
    one with the lowest cost-to-come survives, and only if it beats every earlier node of that cell
    (of any depth). This dominance is what makes the search approximate; cells shrink to exact
    enumeration as the sizes go to zero;
-4. children that cannot beat the best plan found are pruned (below); of the rest, the
-   ``beam_width`` best by the ranking below form the next beam.
+4. children that cannot beat the best plan found are pruned (below); of the rest, ``width`` form
+   the next beam (selection below).
 
 Costs. Raw edge costs c = fuel + kinetic - g (h_end - h_start) are negative in lift, so pruning or
 ordering on the cost-to-come J alone would be wrong: a costly path may still climb. Reweighting
@@ -24,21 +24,29 @@ every edge by the potential g h gives c' = c + g (h_end - h_start) = fuel + kine
 clipped at zero and slowing down earns nothing), and J = C' - g (h - h_0) with C' the summed c'.
 Because the height terms telescope, every plan from a node at height h costs at least
 J - g (h_cap - h) = C' - g (h_cap - h_0) in total, where h_cap bounds the height at the end of the
-goal edge (:func:`~baselines.reference.yardstick.height_cap`). That bound is admissible with
+goal edge (:func:`~baselines.reference.bounds.height_cap`). That bound is admissible with
 negative edges, so a child with C' - g (h_cap - h_0) >= the best plan's cost is pruned without
 losing anything (step 4), and the search stops when the whole beam is pruned.
 
 Ranking. Ordering on C' alone is exactly A* with that admissible bound, but C' is zero for every
 zero-thrust glide and every climb in lift, so it cannot tell them apart. The beam is ranked by
-``J + max(eps d, g (h - h_goal_top))`` instead: the cost-to-come plus the cheapest way to the goal
-if no further lift is found -- straight flight over the horizontal distance d to the goal region at
-``eps``, the action set's cheapest still-air cost per metre (g / (L/D) of the best zero-thrust
-glide for the continuous set; level powered flight for the primitives, whose fixed glides are
-steep), or the height that must be given up to enter it. Written with the reweighted cost this is
-``C' + max(0, eps d - g (h - h_goal_top)) + const``: fuel spent plus the energy still missing to
-get in. It is a heuristic, not a bound (lift ahead makes it pessimistic), which is why it only
-orders the beam and never prunes. Ties (common: zero-thrust glides and climbs in lift all have
-C' = 0) go to the lower cost-to-come, i.e. the node that has more height.
+``J + H`` instead, with H the cheapest way to the goal of two: straight in, ``eps d`` over the
+horizontal distance d to the goal region at ``eps``, the action set's cheapest still-air cost per
+metre (g / (L/D) of the best zero-thrust glide for the continuous set; level powered flight for the
+primitives, whose fixed glides are steep); or through a thermal j, ``eps (d_j + d_j,goal)`` minus
+what climbing there to the goal top is worth (``value_j`` per metre, measured with the action set
+at the thermal's centre); and never less than ``g (h - h_goal_top)``, the height that must be given
+up to get in. It is a heuristic, not a bound, which is why it only orders the beam and never prunes.
+
+Selection. A beam ordered by one heuristic crowds into one corridor, so the selection interleaves
+two orders -- by ``J + H`` and by J alone (the nodes that have gained the most energy, wherever
+they are) -- and takes the first ``region_quota`` nodes of every ``region_size`` square in that
+order before the rest. Ties go to the lower cost-to-come (more height), then the lower index.
+
+Iterative widening. One beam search is not monotone in its width (a wider beam admits children
+that displace a good path's nodes later). :func:`search` therefore runs beams of ``start_width``,
+twice that, ... up to ``beam_width``, each seeded with the best plan of the ones before (a seeded
+path's nodes stay in the beam at every depth), so the best cost never gets worse as the knob grows.
 
 Control sets. ``"primitive"``: the 174 primitives (those within the model's bank limit), i.e. the
 actions of ``soaring/Soaring-v0``. ``"continuous"``: a grid of normalized ``Box(float32)`` actions of
@@ -47,7 +55,8 @@ are the primitives' fixed ones plus, for every (airspeed, course rate) pair, the
 angle (the shallowest path angle that needs no thrust anywhere between the ground and the domain
 ceiling; without it a grid of fixed angles either burns fuel or wastes height).
 
-The search is exact up to the beam width and the cells; ``beam_width`` is the one accuracy knob
+The search is exact up to the beam and the cells (a test checks it against exhaustive enumeration
+with cells of a few centimetres); ``beam_width`` is the one accuracy knob
 (``scripts/reference.py --convergence`` shows the best cost as it is doubled).
 """
 
@@ -58,13 +67,14 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from baselines.reference.bounds import height_cap
 from baselines.sst.core import EDGE_GOAL, EDGE_INVALID, EDGE_VALID, SSTResult, SSTStats
 from baselines.sst.plan import Plan, plan_from_result
-from baselines.sst.soaring import S_CHI, S_E, S_H, S_N, S_T, S_V, SAMPLERS, SoaringProblem
+from baselines.sst.soaring import S_CHI, S_E, S_H, S_N, S_V, SAMPLERS, SoaringProblem
 from soaring_env._validation import ConfigError, check_choice, check_int, check_positive
 from soaring_env.model import SoaringModel
 from soaring_env.physics.atmosphere import G
@@ -84,7 +94,9 @@ _ROWS_PER_CALL = 32768  # rollouts per model call: bounds the (B, N, 4) output t
 class ReferenceConfig:
     """Settings of the reference search.
 
-    :param beam_width: nodes kept per depth -- the accuracy knob (more is better and slower).
+    :param beam_width: nodes kept per depth in the last (widest) beam -- the accuracy knob (more is
+        better and slower).
+    :param start_width: width of the first beam of the iterative widening (each next one doubles).
     :param max_edges: most edges of a plan (the envs truncate at 40 steps).
     :param cell_size: horizontal cell of the dominance grid [m].
     :param height_cell: height layer of the dominance grid [m].
@@ -106,6 +118,7 @@ class ReferenceConfig:
     turns_deg: tuple[float, ...] = CONTINUOUS_TURNS_DEG
     gammas_deg: tuple[float, ...] = CONTINUOUS_GAMMAS_DEG
     primitives: tuple[int, ...] | None = None
+    start_width: int = 250
     region_size: float = 200.0
     region_quota: int = 8
 
@@ -113,6 +126,7 @@ class ReferenceConfig:
         check_positive("region_size", self.region_size)
         check_int("region_quota", self.region_quota, 0)
         check_int("beam_width", self.beam_width, 1)
+        check_int("start_width", self.start_width, 1)
         check_int("max_edges", self.max_edges, 1)
         check_positive("cell_size", self.cell_size)
         check_positive("height_cell", self.height_cell)
@@ -129,8 +143,9 @@ class ReferenceConfig:
                 self, "primitives", tuple(check_int(f"primitives[{i}]", p, 0) for i, p in enumerate(self.primitives))
             )
 
-    def to_dict(self) -> dict:
-        return dataclasses.asdict(self)
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form (sequences as lists); ``ReferenceConfig(**d)`` reads it back."""
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()}
 
 
 def _num(name: str, v: object) -> float:
@@ -168,7 +183,7 @@ def control_set(model: SoaringModel, sampler: str, config: ReferenceConfig) -> n
         idx = np.flatnonzero(ok) if config.primitives is None else np.array(config.primitives, dtype=np.int64)
         if np.any(idx >= model.n_primitives) or not np.all(ok[idx]):
             raise ConfigError(
-                f"primitives={config.primitives!r}: allowed indices are 0..{model.n_primitives - 1} within the bank limit"
+                f"primitives={config.primitives!r}: allowed: indices 0..{model.n_primitives - 1} within the bank limit"
             )
         return np.unique(idx).astype(np.float64)[:, None]
     lo, hi = model.control_low, model.control_high
@@ -253,18 +268,22 @@ def search(
     sampler: str = "primitive",
     config: ReferenceConfig | None = None,
     *,
-    seed_controls: np.ndarray | None = None,
+    seed_controls: Sequence[np.ndarray] = (),
     progress: Callable[[int, int], None] | None = None,
 ) -> SearchResult:
     """Run the reference search from the scenario's start (see the module docstring).
 
+    Iterative widening: beam searches of width ``start_width``, twice that, ... up to
+    ``beam_width``, each seeded with the best plan of the ones before, so the best cost can only
+    improve as ``beam_width`` grows (a single beam search is not monotone in its width).
+
     :param model: the flight model (scenario, aircraft, primitives).
     :param sampler: ``"primitive"`` or ``"continuous"`` -- the action set.
     :param config: search settings.
-    :param seed_controls: a control sequence (rows as in :func:`control_set`) whose nodes are kept in
+    :param seed_controls: control sequences (rows as in :func:`control_set`) whose nodes are kept in
         the beam at every depth, e.g. the best plan in the field without thermals: the search then
-        never does worse than flying that plan.
-    :param progress: called as ``progress(depth, max_edges)`` after every depth.
+        never does worse than flying any of them.
+    :param progress: called as ``progress(done, total)`` in units of depth x stage.
     :returns: the best plan found (unsolved if none).
     """
     if not isinstance(model, SoaringModel):
@@ -276,21 +295,95 @@ def search(
     t_start = time.perf_counter()
     problem = SoaringProblem(model, sampler)
     ctrls = control_set(model, sampler, cfg)
-    m = len(ctrls)
-    if seed_controls is not None:
-        seed_controls = np.asarray(seed_controls, dtype=np.float64).reshape(-1, ctrls.shape[1])
-    sc = model.scenario
-    g = sc.goal
-    root = problem.root_state()
-    h0 = root[S_H]
-    h_cap = height_cap(model)
-    g_top = g.height + g.radius
-    per_metre = still_air_cost_per_metre(model, ctrls)
-    lift = thermal_values(model, ctrls)
-    speed_keys = np.unique(
-        np.round(model.action_to_control(ctrls)[:, 0] if sampler == "continuous" else model.library.table[:, COL_AIRSPEED], 9)
+    seeds = [np.asarray(sq, dtype=np.float64).reshape(-1, ctrls.shape[1]) for sq in seed_controls]
+    widths = []
+    w = min(cfg.start_width, cfg.beam_width)
+    while w < cfg.beam_width:
+        widths.append(w)
+        w *= 2
+    widths.append(cfg.beam_width)
+    ctx = _Context.make(model, problem, sampler, ctrls, cfg)
+    best: tuple[float, np.ndarray, np.ndarray] | None = None
+    rollouts = depth = 0
+    for k, width in enumerate(widths):
+
+        def cb(d: int, n: int, k: int = k) -> None:
+            if progress is not None:
+                progress(k * n + d, n * len(widths))
+
+        found, n_roll, depth = _beam(ctx, width, [*seeds, *([best[2]] if best else [])], cb)
+        rollouts += n_roll
+        if found is not None and (best is None or found[0] < best[0]):
+            best = found
+    if best is None:
+        res = SSTResult(False, math.inf, np.zeros((0, 6)), np.zeros((0, ctrls.shape[1])), np.zeros(0), np.zeros(0),
+                        SSTStats())  # fmt: skip
+        plan = plan_from_result(problem, res)
+        cost = math.inf
+    else:
+        cost, st, cu = best
+        edge = problem.propagate(st[:-1], cu)  # the edge costs, re-flown along the path
+        if not np.array_equal(edge.states, st[1:]):
+            raise RuntimeError("internal error: the reference plan does not re-fly to its nodes")
+        plan = plan_from_result(problem, SSTResult(True, cost, st, cu, edge.cost, edge.duration, SSTStats()))
+    return SearchResult(
+        plan=plan,
+        cost=cost,
+        rollouts=rollouts,
+        seconds=time.perf_counter() - t_start,
+        depth=depth,
+        n_controls=len(ctrls),
     )
 
+
+@dataclass(frozen=True)
+class _Context:
+    """What every beam of one search shares."""
+
+    problem: SoaringProblem
+    ctrls: np.ndarray
+    cfg: ReferenceConfig
+    root: np.ndarray
+    goal: tuple[float, float, float]  # north, east, radius [m]
+    g_top: float
+    h_cap: float
+    per_metre: float
+    lift: np.ndarray
+    speed_keys: np.ndarray
+
+    @classmethod
+    def make(
+        cls, model: SoaringModel, problem: SoaringProblem, sampler: str, ctrls: np.ndarray, cfg: ReferenceConfig
+    ) -> _Context:
+        g = model.scenario.goal
+        if sampler == "continuous":
+            speeds = model.action_to_control(ctrls)[:, 0]
+        else:
+            speeds = model.library.table[:, COL_AIRSPEED]
+        return cls(
+            problem=problem,
+            ctrls=ctrls,
+            cfg=cfg,
+            root=problem.root_state(),
+            goal=(g.north, g.east, g.radius),
+            g_top=g.height + g.radius,
+            h_cap=height_cap(model),
+            per_metre=still_air_cost_per_metre(model, ctrls),
+            lift=thermal_values(model, ctrls),
+            speed_keys=np.unique(np.round(speeds, 9)),
+        )
+
+
+def _beam(
+    ctx: _Context, width: int, seeds: list[np.ndarray], progress: Callable[[int, int], None]
+) -> tuple[tuple[float, np.ndarray, np.ndarray] | None, int, int]:
+    """One beam search of ``width``: ((cost, path states (n + 1, 6), controls (n, c)) of the best
+    plan or None, rollouts, deepest depth)."""
+    problem, ctrls, cfg = ctx.problem, ctx.ctrls, ctx.cfg
+    m = len(ctrls)
+    gn, ge, gr = ctx.goal
+    g_top, h_cap, per_metre, lift, speed_keys = ctx.g_top, ctx.h_cap, ctx.per_metre, ctx.lift, ctx.speed_keys
+    root = ctx.root
     # per-depth node arrays; node i of depth d has parent parents[d][i] in depth d - 1
     states = [root[None, :]]
     costs = [np.zeros(1)]
@@ -300,7 +393,7 @@ def search(
     cell_best = np.zeros(0)
     best_cost = math.inf
     best: tuple[int, int, int, np.ndarray] | None = None  # (depth of parent, parent index, control, end state)
-    seed_idx = 0  # index of the seeded path's node in the current beam (-1: gone)
+    seed_idx = [0] * len(seeds)  # index of each seeded path's node in the current beam (-1: gone)
     rollouts = 0
     depth = 0
     for depth in range(1, cfg.max_edges + 1):
@@ -326,23 +419,24 @@ def search(
             if j[i] < best_cost:
                 best_cost = float(j[i])
                 best = (depth - 1, int(par[i]), int(ctl[i]), end[i].copy())
-        # the seeded path's child this depth (kept whatever its rank)
-        seed_child = -1
-        if seed_controls is not None and seed_idx >= 0 and depth <= len(seed_controls):
-            hit = np.flatnonzero(np.all(ctrls == seed_controls[depth - 1], axis=1))
-            if len(hit):
-                c = seed_idx * m + int(hit[0])
-                seed_child = c if out[c] == EDGE_VALID else -1
+        # the seeded paths' children this depth (kept whatever their rank)
+        seed_child = [-1] * len(seeds)
+        for q, sq in enumerate(seeds):
+            if seed_idx[q] >= 0 and depth <= len(sq):
+                hit = np.flatnonzero(np.all(ctrls == sq[depth - 1], axis=1))
+                if len(hit):
+                    c = seed_idx[q] * m + int(hit[0])
+                    seed_child[q] = c if out[c] == EDGE_VALID else -1
+        forced = np.array(sorted({c for c in seed_child if c >= 0}), dtype=np.int64)
         # 3. valid children; admissible pruning (module docstring)
         keep = np.flatnonzero((out == EDGE_VALID) & (j - G * (h_cap - end[:, S_H]) < best_cost))
-        if seed_child >= 0 and not np.any(keep == seed_child):
-            keep = np.sort(np.append(keep, seed_child))
+        keep = np.union1d(keep, forced)
         if depth == cfg.max_edges or len(keep) == 0:
             break
         ce = end[keep]
         jk = j[keep]
-        d_goal = np.maximum(np.hypot(ce[:, S_N] - g.north, ce[:, S_E] - g.east) - g.radius, 0.0)
-        rank = jk + _cost_to_go_estimate(ce, d_goal, per_metre, g_top, lift, (g.north, g.east))
+        d_goal = np.maximum(np.hypot(ce[:, S_N] - gn, ce[:, S_E] - ge) - gr, 0.0)
+        rank = jk + _cost_to_go_estimate(ce, d_goal, per_metre, g_top, lift, (gn, ge))
         key = _cell_keys(ce, cfg, speed_keys)
         # merge children of one cell: the lowest J (then lowest rank, then first) survives
         order = np.lexsort((np.arange(len(keep)), rank, jk, key))
@@ -357,15 +451,13 @@ def search(
         older[seen] = cell_best[pos[seen]]
         uniq = uniq[jk[uniq] < older]
         # 4. the beam: best rank first, ties by index (deterministic)
-        if len(uniq) > cfg.beam_width:
-            uniq = _select(uniq, rank, jk, ce, cfg)
-        if seed_child >= 0:
-            sp = int(np.flatnonzero(keep == seed_child)[0])
-            if not np.any(uniq == sp):
-                uniq = np.sort(np.append(uniq, sp))
-            seed_idx = int(np.flatnonzero(uniq == sp)[0])
-        else:
-            seed_idx = -1
+        if len(uniq) > width:
+            uniq = _select(uniq, rank, jk, ce, width, cfg)
+        if len(forced):
+            sp = np.searchsorted(keep, forced)  # positions of the forced children in keep
+            uniq = np.union1d(uniq, sp)
+        for q, c in enumerate(seed_child):
+            seed_idx[q] = int(np.searchsorted(uniq, np.searchsorted(keep, c))) if c >= 0 else -1
         # record the beam's cells
         all_keys = np.concatenate([cell_keys, key[uniq]])
         all_best = np.concatenate([cell_best, jk[uniq]])
@@ -379,19 +471,20 @@ def search(
         costs.append(j[sel_children])
         parents.append(par[sel_children])
         controls_of.append(ctl[sel_children])
-        if progress is not None:
-            progress(depth, cfg.max_edges)
-    if progress is not None:
-        progress(cfg.max_edges, cfg.max_edges)
-    plan = _plan(problem, ctrls, states, parents, controls_of, best, best_cost)
-    return SearchResult(
-        plan=plan,
-        cost=best_cost,
-        rollouts=rollouts,
-        seconds=time.perf_counter() - t_start,
-        depth=depth,
-        n_controls=m,
-    )
+        progress(depth, cfg.max_edges)
+    progress(cfg.max_edges, cfg.max_edges)
+    if best is None:
+        return None, rollouts, depth
+    d, i, c, end_state = best
+    path_states = [end_state]
+    path_ctrls = [c]
+    while d > 0:
+        path_states.append(states[d][i])
+        path_ctrls.append(int(controls_of[d][i]))
+        i = int(parents[d][i])
+        d -= 1
+    path_states.append(states[0][0])
+    return (best_cost, np.array(path_states[::-1]), ctrls[np.array(path_ctrls[::-1])]), rollouts, depth
 
 
 def thermal_values(model: SoaringModel, controls: np.ndarray) -> np.ndarray:
@@ -426,34 +519,44 @@ def thermal_values(model: SoaringModel, controls: np.ndarray) -> np.ndarray:
 
 def _cost_to_go_estimate(s, d_goal, per_metre, g_top, lift, goal_ne) -> np.ndarray:
     """The ranking heuristic of the module docstring, per state row of ``s``: the cheaper of flying
-    straight in (``max(eps d, g (h - h_top))``) and of a detour through a thermal j that climbs to
-    the goal top there (``eps (d_j + d_j,goal) - value_j max(0, h_top - h)``)."""
+    straight in (``eps d``) and of a detour through a thermal j that climbs to the goal top there
+    (``eps (d_j + d_j,goal) - value_j max(0, h_top - h)``), but at least ``g (h - h_top)``."""
     h = s[:, S_H]
-    est = np.maximum(per_metre * d_goal, G * (h - g_top))
+    est = per_metre * d_goal
     for tn, te, val in lift:
         d_j = np.hypot(s[:, S_N] - tn, s[:, S_E] - te)
-        d_jg = max(math.hypot(goal_ne[0] - tn, goal_ne[1] - te), 0.0)
+        d_jg = math.hypot(goal_ne[0] - tn, goal_ne[1] - te)
         est = np.minimum(est, per_metre * (d_j + d_jg) - val * np.maximum(0.0, g_top - h))
-    return est
+    return np.maximum(est, G * (h - g_top))  # height above the goal top must be given up either way
 
 
-def _select(cand: np.ndarray, rank: np.ndarray, jk: np.ndarray, s: np.ndarray, cfg: ReferenceConfig) -> np.ndarray:
-    """The beam: ``beam_width`` of ``cand`` (sorted indices), at most ``region_quota`` per region
-    (``region_size`` squares) first, then the best of the rest; each by rank, then cost, then index."""
-    order = cand[np.lexsort((cand, jk[cand], rank[cand]))]
+def _select(
+    cand: np.ndarray, rank: np.ndarray, jk: np.ndarray, s: np.ndarray, width: int, cfg: ReferenceConfig
+) -> np.ndarray:
+    """The beam: ``width`` of ``cand`` (sorted indices). Two orders are interleaved -- by rank
+    (cost-to-come plus the cost-to-go estimate) and by cost-to-come alone (the nodes that have
+    gained the most energy, wherever they are) -- and the first ``region_quota`` of each region
+    (``region_size`` squares) in that order go first, so that no part of the domain is crowded out."""
+    n = len(cand)
+    pos_rank = np.empty(n, dtype=np.int64)
+    pos_rank[np.lexsort((cand, jk[cand], rank[cand]))] = np.arange(n)
+    pos_cost = np.empty(n, dtype=np.int64)
+    pos_cost[np.lexsort((cand, rank[cand], jk[cand]))] = np.arange(n)
+    order = np.lexsort((pos_rank, np.minimum(pos_rank, pos_cost)))
     if cfg.region_quota > 0:
-        rn = np.floor(s[order, S_N] / cfg.region_size).astype(np.int64)
-        re_ = np.floor(s[order, S_E] / cfg.region_size).astype(np.int64)
+        sn = s[cand[order]]
+        rn = np.floor(sn[:, S_N] / cfg.region_size).astype(np.int64)
+        re_ = np.floor(sn[:, S_E] / cfg.region_size).astype(np.int64)
         region = rn * (1 << 20) + re_
-        by_region = np.lexsort((np.arange(len(order)), region))  # stable: rank order within a region
-        first = np.ones(len(order), dtype=bool)
+        by_region = np.lexsort((np.arange(n), region))  # stable: interleaved order within a region
+        first = np.ones(n, dtype=bool)
         first[1:] = region[by_region[1:]] != region[by_region[:-1]]
-        start = np.maximum.accumulate(np.where(first, np.arange(len(order)), 0))
-        place = np.empty(len(order), dtype=np.int64)
-        place[by_region] = np.arange(len(order)) - start
+        start = np.maximum.accumulate(np.where(first, np.arange(n), 0))
+        place = np.empty(n, dtype=np.int64)
+        place[by_region] = np.arange(n) - start
         quota = place < cfg.region_quota
         order = np.concatenate([order[quota], order[~quota]])
-    return np.sort(order[: cfg.beam_width])
+    return np.sort(cand[order[:width]])
 
 
 def _cell_keys(s: np.ndarray, cfg: ReferenceConfig, speed_keys: np.ndarray) -> np.ndarray:
@@ -466,31 +569,6 @@ def _cell_keys(s: np.ndarray, cfg: ReferenceConfig, speed_keys: np.ndarray) -> n
     nv = len(speed_keys) + 1
     # north, east < 2^16 cells each, height < 2^13 layers: fits in 63 bits for any sane config
     return (((ni * (1 << 16) + ei) * (1 << 13) + hi) * cfg.course_cells + ci) * nv + vi
-
-
-def _plan(problem, ctrls, states, parents, controls_of, best, best_cost) -> Plan:
-    """Backtrack the best goal edge to the root and turn the path into a :class:`Plan`."""
-    if best is None:
-        res = SSTResult(False, math.inf, np.zeros((0, 6)), np.zeros((0, ctrls.shape[1])), np.zeros(0), np.zeros(0),
-                        SSTStats())  # fmt: skip
-        return plan_from_result(problem, res)
-    d, i, c, end = best
-    path_states = [end]
-    path_ctrls = [c]
-    while d > 0:
-        path_states.append(states[d][i])
-        path_ctrls.append(int(controls_of[d][i]))
-        i = int(parents[d][i])
-        d -= 1
-    path_states.append(states[0][0])
-    st = np.array(path_states[::-1])
-    cu = ctrls[np.array(path_ctrls[::-1])]
-    # the edge costs are re-flown from the path (the costs-to-come are differences of sums)
-    edge = problem.propagate(st[:-1], cu)
-    if not np.array_equal(edge.states, st[1:]):
-        raise RuntimeError("internal error: the reference plan does not re-fly to its nodes")
-    res = SSTResult(True, float(best_cost), st, cu, edge.cost, edge.duration, SSTStats())
-    return plan_from_result(problem, res)
 
 
 __all__ = ["ReferenceConfig", "SearchResult", "control_set", "glide_angle", "search", "still_air_cost_per_metre"]

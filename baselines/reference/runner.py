@@ -1,0 +1,138 @@
+"""The reference table: :func:`~baselines.reference.yardstick.compute_reference` for many scenarios
+in parallel worker processes, one JSON file per scenario (written atomically as soon as it is
+done, so an interrupted run resumes), and the markdown table built from those files.
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing as mp
+import os
+from collections.abc import Mapping, Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from pathlib import Path
+from typing import Any
+
+from baselines._runs import DirLock, watch_parent
+from baselines.reference.beam import ReferenceConfig
+from baselines.reference.yardstick import (
+    ScenarioReference,
+    compute_reference,
+    load_reference,
+    reference_path,
+    save_reference,
+)
+from baselines.sst.soaring import SAMPLERS
+from soaring_env._validation import ConfigError, check_int
+from soaring_env.scenario import Scenario
+
+
+def _job(args: tuple[dict[str, Any], tuple[str, ...], dict[str, Any], str]) -> str:
+    sc_dict, samplers, cfg_dict, path = args
+    ref = compute_reference(Scenario.from_dict(sc_dict), samplers, ReferenceConfig(**cfg_dict))
+    save_reference(ref, path)
+    return path
+
+
+def _is_current(path: Path, scenario: Scenario, samplers: Sequence[str], cfg: ReferenceConfig) -> bool:
+    """A finished file for the same scenario, samplers and settings (corrupt files raise, naming it)."""
+    if not path.exists():
+        return False
+    ref = load_reference(path)
+    want = cfg.to_dict()
+    return ref.scenario == scenario and all(s in ref.samplers and ref.samplers[s].settings == want for s in samplers)
+
+
+def run_references(
+    scenarios: Sequence[Scenario],
+    out_dir: str | Path,
+    *,
+    samplers: Sequence[str] = SAMPLERS,
+    config: ReferenceConfig | None = None,
+    workers: int = 1,
+    fresh: bool = False,
+    progress: bool = True,
+) -> dict[str, ScenarioReference]:
+    """Compute (or load, if already done with the same settings) the reference of every scenario.
+
+    :param scenarios: scenarios with distinct names (the file names).
+    :param out_dir: folder of the ``<name>.json`` files (one writer at a time: a lock file).
+    :param samplers: action sets.
+    :param config: search settings.
+    :param workers: parallel worker processes (each single-threaded).
+    :param fresh: recompute even finished files.
+    :param progress: show a progress bar (tqdm, if installed).
+    :returns: the references by scenario name, in the order given.
+    """
+    cfg = config if config is not None else ReferenceConfig()
+    check_int("workers", workers, 1)
+    names = [s.name for s in scenarios]
+    if len(set(names)) != len(names):
+        raise ConfigError(f"scenario names must be distinct (they name the files); got {names!r}")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    with DirLock(out, "reference run"):
+        todo = [s for s in scenarios if fresh or not _is_current(reference_path(out, s.name), s, samplers, cfg)]
+        done = len(scenarios) - len(todo)
+        if done and progress:
+            print(f"resuming: {done} of {len(scenarios)} scenarios already done in {out}", flush=True)
+        if todo:
+            bar = _bar(len(scenarios), done, progress)
+            for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+                os.environ.setdefault(var, "1")
+            jobs = [(s.to_dict(), tuple(samplers), cfg.to_dict(), str(reference_path(out, s.name))) for s in todo]
+            n = min(workers, len(jobs))
+            ctx = mp.get_context("spawn")
+            with ProcessPoolExecutor(n, ctx, initializer=watch_parent, initargs=(os.getpid(),)) as pool:
+                pending = {pool.submit(_job, j) for j in jobs}
+                while pending:
+                    finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+                    for fut in finished:
+                        fut.result()
+                        if bar is not None:
+                            bar.update(1)
+            if bar is not None:
+                bar.close()
+    return {s.name: load_reference(reference_path(out, s.name)) for s in scenarios}
+
+
+def _bar(total: int, initial: int, enabled: bool) -> Any:
+    if not enabled:
+        return None
+    try:
+        from tqdm.auto import tqdm
+    except ImportError:  # tqdm is an optional extra
+        return None
+    return tqdm(total=total, initial=initial, desc="reference (compiling on first run)", unit="scenario")
+
+
+def _f(x: float) -> str:
+    return f"{x:,.0f}" if math.isfinite(x) else "—"
+
+
+def reference_table(refs: Mapping[str, ScenarioReference], samplers: Sequence[str] = SAMPLERS) -> str:
+    """Markdown: per scenario the lower bound and, per action set, direct and best cost [J/kg], the
+    thermal benefit (direct - best), the best plan's flight time and the search time."""
+    head = ["scenario", "lower bound"]
+    for s in samplers:
+        head += [f"{s}: direct", f"{s}: best", f"{s}: benefit", f"{s}: flight [s]", f"{s}: search [s]"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for name, ref in refs.items():
+        row = [name, _f(ref.lower_bound)]
+        for s in samplers:
+            r = ref.samplers.get(s)
+            if r is None:
+                row += ["—"] * 5
+                continue
+            row += [
+                _f(r.direct_cost),
+                _f(r.best_cost),
+                _f(r.direct_cost - r.best_cost),
+                _f(r.flight_time),
+                f"{r.seconds:.0f}",
+            ]
+        lines.append("| " + " | ".join(row) + " |")
+    return "\n".join(lines)
+
+
+__all__ = ["reference_table", "run_references"]

@@ -1,0 +1,303 @@
+"""The optimality yardstick: reference search, bounds and regret."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from baselines.reference import (
+    ReferenceConfig,
+    compute_reference,
+    control_set,
+    glide_angle,
+    height_cap,
+    load_reference,
+    lower_bound,
+    regret,
+    save_reference,
+    search,
+    without_thermals,
+)
+from baselines.sst.core import EDGE_GOAL, EDGE_VALID
+from baselines.sst.soaring import S_H, SoaringProblem
+from soaring_env._validation import ConfigError
+from soaring_env.model import GOAL, SoaringModel
+from soaring_env.physics.atmosphere import G
+from soaring_env.physics.thermals import Thermal, WindField
+from soaring_env.scenario import Bounds, GoalRegion, Scenario, make_scenario, paper_scenario
+
+#: A tiny problem: the goal one to three primitives away, one thermal on the way.
+TINY = Scenario(
+    field=WindField(thermals=(Thermal(north=500.0, east=60.0, strength=2.5),), zi=1400.0, wind_east=1.0),
+    start=(0.0, 0.0, 0.0, 250.0),
+    goal=GoalRegion(north=900.0, east=100.0, height=260.0, radius=120.0),
+    bounds=Bounds(-1200.0, 1800.0, -1200.0, 1200.0, 1500.0),
+    name="tiny",
+)
+#: A small primitive subset: straight and curves at both speeds, level and the two glides.
+SUBSET = (0, 1, 2, 5, 6, 7, 12, 22, 37, 47, 57, 67)
+
+
+def _enumerate(model: SoaringModel, prims: tuple[int, ...], depth: int) -> float:
+    """Brute force: the cheapest primitive sequence of at most ``depth`` edges that reaches the goal."""
+    problem = SoaringProblem(model, "primitive")
+    ctrls = np.array(prims, dtype=np.float64)[:, None]
+    x = problem.root_state()[None, :]
+    j = np.zeros(1)
+    best = math.inf
+    for _ in range(depth):
+        n, m = len(x), len(ctrls)
+        e = problem.propagate(np.repeat(x, m, axis=0), np.tile(ctrls, (n, 1)))
+        jj = np.repeat(j, m) + e.cost
+        goal = e.outcome == EDGE_GOAL
+        if goal.any():
+            best = min(best, float(jj[goal].min()))
+        ok = e.outcome == EDGE_VALID
+        x, j = e.states[ok], jj[ok]
+    return best
+
+
+@pytest.fixture(scope="module")
+def tiny() -> SoaringModel:
+    return SoaringModel(scenario=TINY)
+
+
+@pytest.mark.parametrize("depth", [2, 3])
+def test_search_finds_the_enumerated_optimum(tiny: SoaringModel, depth: int) -> None:
+    exact = _enumerate(tiny, SUBSET, depth)
+    assert math.isfinite(exact)
+    # cells of 1 cm and a beam wider than the tree: the search is exhaustive
+    cfg = ReferenceConfig(
+        beam_width=len(SUBSET) ** depth,
+        start_width=len(SUBSET) ** depth,
+        max_edges=depth,
+        cell_size=0.01,
+        height_cell=0.01,
+        course_cells=4096,
+        primitives=SUBSET,
+    )
+    res = search(tiny, "primitive", cfg)
+    assert res.cost == pytest.approx(exact, abs=1e-9)
+    assert res.plan.solved and len(res.plan) <= depth
+
+
+def test_default_cells_never_beat_the_optimum(tiny: SoaringModel) -> None:
+    exact = _enumerate(tiny, SUBSET, 3)
+    res = search(tiny, "primitive", ReferenceConfig(beam_width=50, start_width=50, max_edges=3, primitives=SUBSET))
+    assert res.cost >= exact - 1e-9  # a found plan is a real plan
+
+
+def test_wider_beam_never_worse(tiny: SoaringModel) -> None:
+    costs = [
+        search(tiny, "continuous", ReferenceConfig(beam_width=w, start_width=20, max_edges=8)).cost
+        for w in (20, 40, 80)
+    ]
+    assert costs[0] >= costs[1] >= costs[2]
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 10_000),
+    v=st.floats(-1, 1),
+    w=st.floats(-1, 1),
+    gam=st.floats(-1, 1),
+    vp=st.one_of(st.none(), st.floats(10.0, 20.0)),
+)
+def test_reweighted_edge_costs_are_non_negative(seed: int, v: float, w: float, gam: float, vp: float | None) -> None:
+    sc = make_scenario(np.random.default_rng(seed))
+    m = SoaringModel(scenario=sc)
+    rng = np.random.default_rng(seed + 1)
+    th = sc.field.thermals[0] if sc.field.thermals else None
+    n0 = (th.north if th else 0.0) + rng.uniform(-150, 150)
+    e0 = (th.east if th else 0.0) + rng.uniform(-150, 150)
+    x = np.array([n0, e0, rng.uniform(-math.pi, math.pi), rng.uniform(50, 1200)])
+    r = m.rollout_control(
+        x, m.action_to_control(np.array([v, w, gam], np.float32).astype(np.float64)), airspeed_prev=vp
+    )
+    c_prime = r.cost[0] + G * (r.final[0, 3] - x[3])
+    assert c_prime >= -1e-9 * max(1.0, abs(r.cost[0]))
+    assert c_prime == pytest.approx(r.fuel[0] + r.kinetic[0], abs=1e-6)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 10_000), k=st.integers(0, 173), dn=st.floats(-400, 400), de=st.floats(-400, 400))
+def test_goal_edges_respect_the_lower_bound(seed: int, k: int, dn: float, de: float) -> None:
+    """Every goal edge from any start costs at least -g (h_cap - h_start), the bound's one-edge case."""
+    sc = make_scenario(np.random.default_rng(seed))
+    g = sc.goal
+    m = SoaringModel(scenario=sc)
+    h0 = g.height + np.random.default_rng(seed).uniform(-200, 200)
+    if not bool(sc.bounds.contains(g.north + dn, g.east + de, h0)) or h0 <= 10:
+        return
+    x = np.array([g.north + dn, g.east + de, math.atan2(-de, -dn), h0])  # heading for the goal centre
+    r = m.rollout_primitive(x, k)
+    code, _ = m.classify(r)
+    if code[0] == GOAL:
+        assert r.cost[0] >= -G * (height_cap(m) - h0) - 1e-9
+
+
+def test_lower_bound_holds_for_reference_plans() -> None:
+    for seed in (10000, 10001, 10002):
+        sc = make_scenario(np.random.default_rng(seed), name=f"random-{seed}")
+        m = SoaringModel(scenario=sc)
+        res = search(m, "primitive", ReferenceConfig(beam_width=40, start_width=40))
+        assert res.cost >= lower_bound(m)
+        assert res.plan.solved
+
+
+def test_lower_bound_closed_form() -> None:
+    m = SoaringModel()  # paper: no thermal within reach of the goal
+    g = m.scenario.goal
+    assert lower_bound(m) == pytest.approx(-G * (g.height + g.radius - m.scenario.start[3]))
+    near = m.scenario.replace(field=WindField(thermals=(Thermal(north=g.north, east=g.east, strength=2.0),), zi=1400.0))
+    mn = SoaringModel(scenario=near)
+    lib = mn.library
+    assert height_cap(mn) == pytest.approx(
+        g.height + g.radius + 1.2 * 2.0 * (lib.duration - lib.duration / lib.n_points)
+    )
+
+
+def test_regret_closed_form() -> None:
+    assert regret(-1000.0, -1000.0, 1000.0) == 0.0
+    assert regret(1000.0, -1000.0, 1000.0) == 1.0
+    assert regret(0.0, -1000.0, 1000.0) == 0.5
+    assert regret(3000.0, -1000.0, 1000.0) == 2.0
+    assert math.isnan(regret(5.0, 0.0, 10.0))  # the thermals offer (almost) nothing
+    assert math.isnan(regret(math.inf, 0.0, 1000.0))
+
+
+def test_glide_angle_needs_no_thrust_and_is_the_shallowest(tiny: SoaringModel) -> None:
+    ac = tiny.aircraft
+    for v, w in ((10.0, 0.0), (15.0, 0.2), (20.0, -0.5)):
+        gam = glide_angle(tiny, v, w, 1500.0)
+        bank = math.atan(v * w / G)
+        h = np.array([0.0, 1500.0])
+        assert np.all(ac.thrust(v, gam, bank, h) == 0.0)
+        assert np.any(ac.thrust(v, gam + 1e-6, bank, h) > 0.0)
+
+
+def test_continuous_control_set_holds_exact_float32_actions_and_glides(tiny: SoaringModel) -> None:
+    cfg = ReferenceConfig()
+    c = control_set(tiny, "continuous", cfg)
+    assert np.array_equal(c, c.astype(np.float32).astype(np.float64))
+    assert np.all(np.abs(c) <= 1.0)
+    u = tiny.action_to_control(c)
+    ac = tiny.aircraft
+    # for every (airspeed, turn) pair one control needs no thrust anywhere in the height range
+    pairs = {(round(a, 6), round(b, 9)) for a, b in u[:, :2]}
+    for v, w in pairs:
+        rows = u[(np.round(u[:, 0], 6) == v) & (np.round(u[:, 1], 9) == w)]
+        bank = math.atan(rows[0, 0] * rows[0, 1] / G)
+        zero = [np.all(ac.thrust(r[0], r[2], bank, np.array([0.0, 1500.0])) == 0.0) for r in rows]
+        assert any(zero)
+
+
+@pytest.fixture(scope="module")
+def paper_plans() -> dict:
+    m = SoaringModel(scenario=paper_scenario())
+    cfg = ReferenceConfig(beam_width=60, start_width=30)
+    return {s: search(m, s, cfg) for s in ("primitive", "continuous")}
+
+
+@pytest.mark.parametrize("kind", ["primitive", "continuous"])
+def test_reference_plans_replay_exactly_through_env_step(kind: str, paper_plans: dict) -> None:
+    import gymnasium as gym
+
+    import soaring_env  # noqa: F401
+
+    res = paper_plans[kind]
+    plan = res.plan
+    assert plan.solved
+    env = gym.make("soaring/Soaring-v0" if kind == "primitive" else "soaring/SoaringContinuous-v0")
+    env.reset(seed=0, options={"scenario": paper_scenario()})
+    spent = 0.0
+    for i, a in enumerate(plan.actions):
+        _, _, term, trunc, info = env.step(a)
+        assert info["edge_cost"] == plan.edge_costs[i]
+        assert np.array_equal(env.unwrapped.state, plan.states[i + 1])
+        spent = info["energy_spent"]
+        assert not trunc or i == len(plan.actions) - 1  # TimeLimit flags the 40th step too
+    assert term and info["is_success"]
+    assert spent == plan.cost == res.cost
+
+
+def test_same_settings_same_plan(paper_plans: dict) -> None:
+    m = SoaringModel(scenario=paper_scenario())
+    again = search(m, "continuous", ReferenceConfig(beam_width=60, start_width=30))
+    assert again.cost == paper_plans["continuous"].cost
+    assert json.dumps(again.plan.to_dict()) == json.dumps(paper_plans["continuous"].plan.to_dict())
+
+
+def test_seeded_search_is_never_worse_than_its_seed(tiny: SoaringModel) -> None:
+    direct = search(without_thermals(tiny), "continuous", ReferenceConfig(beam_width=20, start_width=20))
+    seed = np.array([np.asarray(a, np.float64) for a in direct.plan.actions])
+    res = search(tiny, "continuous", ReferenceConfig(beam_width=5, start_width=5), seed_controls=[seed])
+    # replay the seed in the real field: the search must do at least as well if it reaches the goal
+    problem = SoaringProblem(tiny, "continuous")
+    x = problem.root_state()[None, :]
+    total = 0.0
+    for u in seed:
+        e = problem.propagate(x, u[None, :])
+        total += float(e.cost[0])
+        x = e.states
+        if e.outcome[0] != EDGE_VALID:
+            break
+    if e.outcome[0] == EDGE_GOAL:
+        assert res.cost <= total
+    assert x[0, S_H] > 0
+
+
+def test_reference_file_round_trip(tmp_path, tiny: SoaringModel) -> None:
+    ref = compute_reference(TINY, ("primitive",), ReferenceConfig(beam_width=20, start_width=20, max_edges=6))
+    p = tmp_path / "tiny.json"
+    save_reference(ref, p)
+    back = load_reference(p)
+    assert back == ref
+    r = ref.samplers["primitive"]
+    assert ref.lower_bound <= r.best_cost <= r.direct_cost + 1e-9 or not math.isfinite(r.direct_cost)
+    assert ref.regret(r.best_cost, "primitive") == pytest.approx(0.0) or math.isnan(
+        ref.regret(r.best_cost, "primitive")
+    )
+    p.write_text("{not json")
+    with pytest.raises(ConfigError, match=r"tiny\.json"):
+        load_reference(p)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field"),
+    [
+        ({"beam_width": 0}, "beam_width"),
+        ({"beam_width": "10"}, "beam_width"),
+        ({"max_edges": 1.5}, "max_edges"),
+        ({"cell_size": -1.0}, "cell_size"),
+        ({"cell_size": float("nan")}, "cell_size"),
+        ({"height_cell": "a"}, "height_cell"),
+        ({"course_cells": 0}, "course_cells"),
+        ({"speeds": ()}, "speeds"),
+        ({"speeds": ("x",)}, "speeds"),
+        ({"turns_deg": [float("inf")]}, "turns_deg"),
+        ({"primitives": ()}, "primitives"),
+        ({"primitives": (1, -2)}, "primitives"),
+        ({"region_quota": -1}, "region_quota"),
+        ({"start_width": 0}, "start_width"),
+    ],
+)
+def test_bad_settings_name_the_field(kwargs: dict, field: str) -> None:
+    with pytest.raises(ConfigError, match=field):
+        ReferenceConfig(**kwargs)
+
+
+def test_bad_search_input(tiny: SoaringModel) -> None:
+    with pytest.raises(ConfigError, match="sampler"):
+        search(tiny, "spline")
+    with pytest.raises(ConfigError, match="model"):
+        search("paper", "primitive")  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="speeds"):
+        search(tiny, "continuous", ReferenceConfig(speeds=(5.0,)))
+    with pytest.raises(ConfigError, match="primitives"):
+        search(tiny, "primitive", ReferenceConfig(primitives=(500,)))
