@@ -145,3 +145,15 @@ def check_cli_args(
         v = getattr(args, name)
         if v is not None and Path(v).exists() and not Path(v).is_dir():
             parser.error(f"--{name.replace('_', '-')}={str(v)!r} is a file; an output directory is required")
+
+
+def progress_bar(total: int, initial: int, enabled: bool, desc: str, unit: str) -> Any:
+    """A tqdm bar over ``total`` items of which ``initial`` are done, or None (disabled, or tqdm --
+    an optional extra -- not installed)."""
+    if not enabled:
+        return None
+    try:
+        from tqdm.auto import tqdm
+    except ImportError:
+        return None
+    return tqdm(total=total, initial=initial, desc=desc, unit=unit)

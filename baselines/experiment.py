@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from baselines._runs import holds_dir_lock, watch_parent
+from baselines._runs import holds_dir_lock, progress_bar, watch_parent
 from baselines.reference.yardstick import ScenarioReference
 from baselines.sst.core import SSTError
 from baselines.sst.soaring import SAMPLERS, SoaringSSTConfig
@@ -192,7 +192,7 @@ def run_experiment(cfg: ExperimentConfig, *, progress: bool = True, fresh: bool 
         # one single-threaded planner per core: keep BLAS/OpenMP pools out of the way
         for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
             os.environ.setdefault(var, "1")
-        bar = _progress(len(jobs), len(done), progress)
+        bar = progress_bar(len(jobs) + len(done), len(done), progress, "SST runs", "run")
         ctx = mp.get_context("spawn")
         workers = min(cfg.workers, len(jobs))
         # workers exit when this process dies (SIGTERM, SIGKILL): watch_parent polls their parent PID
@@ -209,16 +209,6 @@ def run_experiment(cfg: ExperimentConfig, *, progress: bool = True, fresh: bool 
         if bar is not None:
             bar.close()
     return [done[k] for k in sorted(done, key=lambda k: (cfg.planners.index(k[0]), k[1]))]
-
-
-def _progress(total: int, initial: int, enabled: bool) -> Any:
-    if not enabled:
-        return None
-    try:
-        from tqdm.auto import tqdm
-    except ImportError:  # tqdm is an optional extra
-        return None
-    return tqdm(total=total + initial, initial=initial, desc="SST runs", unit="run")
 
 
 # --- summary and table ------------------------------------------------------------------------

@@ -29,6 +29,7 @@ import gymnasium as gym
 import numpy as np
 
 import soaring_env  # noqa: F401  (registers the ids)
+from baselines._runs import check_cli_args
 
 SINGLE_TARGET_RATIO = 3.0
 NATIVE_TARGET = 500_000.0
@@ -102,6 +103,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--sync-envs", type=int, default=16, help="envs of gymnasium's sync vector env")
     p.add_argument("--strict", action="store_true", help="exit with status 1 if a target fails")
     args = p.parse_args(argv)
+    check_cli_args(p, args, counts=("repeats", "num_envs", "sync_envs"), positive=("seconds",))
 
     pinning = pin_one_core()
     print(f"soaring-env benchmark | {pinning} | NUMBA_NUM_THREADS={os.environ['NUMBA_NUM_THREADS']}")

@@ -40,6 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from baselines._runs import check_cli_args
 from soaring_env import Aircraft, PrimitiveLibrary, Thermal, WindField, rollout
 
 BATCHES = (1, 64, 4096)
@@ -182,6 +183,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true", help="short run (about 0.15 s per timed cell)")
     parser.add_argument("--seconds", type=float, default=0.6, help="time per timed cell and implementation [s]")
     args = parser.parse_args(argv)
+    check_cli_args(parser, args, positive=("seconds",))
     seconds = 0.15 if args.quick else args.seconds
     pinned = pin_to_one_core()
 

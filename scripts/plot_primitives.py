@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from baselines._runs import check_cli_args
 from soaring_env import Aircraft, PrimitiveLibrary, WindField, rollout
 from soaring_env.primitives import FAMILIES
 
@@ -99,6 +100,7 @@ def main(argv: list[str] | None = None) -> Path:
     parser.add_argument("--n", type=int, default=30, help="output points N per primitive")
     parser.add_argument("--h0", type=float, default=1000.0, help="start height [m] (only offsets are drawn)")
     args = parser.parse_args(argv)
+    check_cli_args(parser, args, counts=("n",), positive=("ts",))
     lib, paths = expand(args.ts, args.n, args.h0)
     out = plot(lib, paths, args.h0, args.out)
     print(out)

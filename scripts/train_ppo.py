@@ -23,6 +23,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from baselines._runs import check_cli_args
 from baselines.ppo import ALGOS, TrainConfig, plot_learning_curve, train
 
 #: Wall-clock shares of ``--minutes`` for ``--algo all`` (masked PPO steps ~4x slower: the masks
@@ -65,6 +66,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--checkpoint-freq", type=int, default=None, help="checkpoint every this many timesteps")
     p.add_argument("--set", action="append", default=[], metavar="FIELD=JSON", help="any other TrainConfig field")
     args = p.parse_args(argv)
+    check_cli_args(
+        p,
+        args,
+        counts=("timesteps", "n_envs", "eval_freq", "eval_scenarios", "checkpoint_freq"),
+        seeds=("seed",),
+        positive=("minutes",),
+        dirs=("out",),
+    )
 
     algos = list(ALGOS) if args.algo == "all" else [args.algo]
     overrides: dict[str, Any] = {"seed": args.seed, "progress_bar": not args.no_progress}

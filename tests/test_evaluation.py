@@ -209,3 +209,39 @@ def test_report_table_and_plots(tmp_path: Path) -> None:
     for f in files:
         assert f.is_file() and f.stat().st_size > 0
     assert {f.name for f in files} == {"results.md", "boxplots.png", "trajectories.png"}
+
+
+def test_every_episode_carries_its_regret(tmp_path: Path) -> None:
+    from baselines.evaluation import attach_regret, bootstrap_ci
+    from baselines.reference import SamplerReference, ScenarioReference
+
+    cfg = _small_config(agents=("heuristic", "heuristic-continuous", "random"), seeds=(0, 1))
+    scen = {name: resolve_scenario(name) for name in cfg.scenarios}
+
+    def ref(best: float, direct: float) -> SamplerReference:
+        return SamplerReference(best, direct, [], [], 0.0, {}, 0, 0.0)
+
+    refs = {
+        name: ScenarioReference(sc, -1500.0, {"primitive": ref(-1000.0, 2000.0), "continuous": ref(-500.0, 1500.0)})
+        for name, sc in scen.items()
+    }
+    res = run_evaluation(cfg, tmp_path, resume=False, references=refs)
+    on_disk = load_results(tmp_path)
+    for ep in res["episodes"]:
+        if not ep["success"]:
+            assert ep["regret"] is None
+            continue
+        best, direct = (-1000.0, 2000.0) if ep["env_id"] == DISCRETE_ID else (-500.0, 1500.0)
+        assert ep["regret"] == pytest.approx((ep["energy_spent"] - best) / (direct - best))
+    assert [e["regret"] for e in on_disk["episodes"]] == [e["regret"] for e in res["episodes"]]
+    rows = {r["agent"]: r for r in summarize(res)}
+    h = rows["heuristic"]
+    regs = [e["regret"] for e in res["episodes"] if e["agent"] == "heuristic" and e["regret"] is not None]
+    assert h["regret_median"][0] == pytest.approx(float(np.median(regs)))
+    assert h["regret_median"][1] <= h["regret_median"][0] <= h["regret_median"][2]
+    assert "regret, median [95 % CI]" in markdown_table(res)
+    # a reference made for another scenario is not used
+    other = {n: ScenarioReference(resolve_scenario("random-5"), r.lower_bound, r.samplers) for n, r in refs.items()}
+    assert all(e["regret"] is None for e in attach_regret(res, other)["episodes"])
+    assert bootstrap_ci([], np.median)[0] != bootstrap_ci([], np.median)[0]  # NaN for no data
+    assert bootstrap_ci([1.0, 2.0, 3.0], np.mean) == bootstrap_ci([1.0, 2.0, 3.0], np.mean)  # seeded

@@ -13,7 +13,7 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
 from typing import Any
 
-from baselines._runs import DirLock, watch_parent
+from baselines._runs import DirLock, progress_bar, watch_parent
 from baselines.reference.beam import ReferenceConfig
 from baselines.reference.yardstick import (
     ScenarioReference,
@@ -30,6 +30,11 @@ from soaring_env.scenario import Scenario
 def _job(args: tuple[dict[str, Any], tuple[str, ...], dict[str, Any], str]) -> str:
     sc_dict, samplers, cfg_dict, path = args
     ref = compute_reference(Scenario.from_dict(sc_dict), samplers, ReferenceConfig(**cfg_dict))
+    p = Path(path)
+    if p.exists():  # keep the other action sets of an existing file for the same scenario
+        old = load_reference(p)
+        if old.scenario == ref.scenario:
+            ref = ScenarioReference(ref.scenario, ref.lower_bound, {**old.samplers, **ref.samplers})
     save_reference(ref, path)
     return path
 
@@ -77,7 +82,7 @@ def run_references(
         if done and progress:
             print(f"resuming: {done} of {len(scenarios)} scenarios already done in {out}", flush=True)
         if todo:
-            bar = _bar(len(scenarios), done, progress)
+            bar = progress_bar(len(scenarios), done, progress, "reference (the first compiles the kernels)", "scenario")
             for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
                 os.environ.setdefault(var, "1")
             jobs = [(s.to_dict(), tuple(samplers), cfg.to_dict(), str(reference_path(out, s.name))) for s in todo]
@@ -94,16 +99,6 @@ def run_references(
             if bar is not None:
                 bar.close()
     return {s.name: load_reference(reference_path(out, s.name)) for s in scenarios}
-
-
-def _bar(total: int, initial: int, enabled: bool) -> Any:
-    if not enabled:
-        return None
-    try:
-        from tqdm.auto import tqdm
-    except ImportError:  # tqdm is an optional extra
-        return None
-    return tqdm(total=total, initial=initial, desc="reference (compiling on first run)", unit="scenario")
 
 
 def _f(x: float) -> str:
