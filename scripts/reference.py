@@ -7,7 +7,8 @@ evaluation scenario -- lower bound, direct-flight cost and best plan per action 
     python scripts/reference.py --convergence        # paper: best cost as the beam width doubles
 
 Writes one JSON per scenario to ``results/reference/<name>.json`` (atomically, as soon as it is
-done; a rerun resumes and recomputes only files whose settings differ) and ``table.md``;
+done; a rerun resumes and recomputes only files whose settings differ), ``table.md`` and
+``paper.png`` (the paper scenario's best and direct plans, replayed through ``env.step``);
 ``--convergence`` writes ``convergence/convergence.md`` and ``convergence.json``. Every regret the project
 reports (``scripts/evaluate.py``, ``scripts/reproduce_paper.py``, ``scripts/bench_sst.py``) reads
 these files.
@@ -43,6 +44,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--fresh", action="store_true", help="recompute finished scenarios too")
     p.add_argument("--convergence", action="store_true", help="paper scenario at 1/2, 1 and 2 x the beam width")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--no-figures", action="store_true", help="skip the PNG of the paper scenario's plans")
     args = p.parse_args(argv)
     check_cli_args(p, args, counts=("heldout", "beam_width", "workers"), dirs=("out",))
     try:
@@ -70,6 +72,10 @@ def main(argv: list[str] | None = None) -> int:
         p.error(str(exc))
     table = reference_table(refs, args.samplers)
     atomic_write_text(args.out / "table.md", table + "\n")
+    if not args.no_figures and "paper" in refs:
+        from baselines.reference.plots import plot_reference
+
+        print(f"figure: {plot_reference(refs['paper'], args.out / 'paper.png')}")
     print(table)
     print(f"\n{len(refs)} scenarios in {time.perf_counter() - t0:.0f} s; table: {args.out / 'table.md'}")
     return 0

@@ -301,3 +301,36 @@ def test_bad_search_input(tiny: SoaringModel) -> None:
         search(tiny, "continuous", ReferenceConfig(speeds=(5.0,)))
     with pytest.raises(ConfigError, match="primitives"):
         search(tiny, "primitive", ReferenceConfig(primitives=(500,)))
+
+
+def test_bad_reference_entry_points(tmp_path) -> None:
+    from baselines.reference.runner import run_references
+
+    with pytest.raises(ConfigError, match="scenario"):
+        compute_reference("paper", ("primitive",))  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="samplers"):
+        compute_reference(TINY, "primitive")
+    with pytest.raises(ConfigError, match="sampler"):
+        compute_reference(TINY, ("spline",), ReferenceConfig(beam_width=5, start_width=5, max_edges=2))
+    with pytest.raises(ConfigError, match="config"):
+        compute_reference(TINY, ("primitive",), {"beam_width": 5})  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="cost"):
+        regret("1", 0.0, 100.0)  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="workers"):
+        run_references([TINY], tmp_path, workers=0)
+    with pytest.raises(ConfigError, match="distinct"):
+        run_references([TINY, TINY], tmp_path)
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(ConfigError, match="file"):
+        run_references([TINY], tmp_path / "file")
+
+
+def test_reference_figure(tmp_path) -> None:
+    from baselines.reference.plots import plot_reference, replay
+
+    ref = compute_reference(TINY, ("primitive",), ReferenceConfig(beam_width=20, start_width=20, max_edges=6))
+    path, times, energy = replay(ref, "primitive")
+    assert energy == ref.samplers["primitive"].best_cost  # the figure shows exactly the stored plan
+    assert len(path) == len(times) and times[0] == 0.0
+    png = plot_reference(ref, tmp_path / "tiny.png")
+    assert png.stat().st_size > 10_000

@@ -17,6 +17,9 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import numpy as np
+
+from soaring_env._validation import ConfigError
 from soaring_env.model import SoaringModel
 from soaring_env.physics.atmosphere import G
 
@@ -56,6 +59,9 @@ def without_thermals(model: SoaringModel) -> SoaringModel:
 
 def regret(cost: float, best: float, direct: float) -> float:
     """``(cost - best) / (direct - best)``; NaN if a value is missing or the gap is below MIN_GAP."""
+    for name, v in (("cost", cost), ("best", best), ("direct", direct)):
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+            raise ConfigError(f"{name}={v!r} must be a number [J/kg]")
     if not (math.isfinite(cost) and math.isfinite(best) and math.isfinite(direct)) or direct - best < MIN_GAP:
         return math.nan
     return (cost - best) / (direct - best)

@@ -70,13 +70,16 @@ def run_references(
     :returns: the references by scenario name, in the order given.
     """
     cfg = config if config is not None else ReferenceConfig()
+    if not isinstance(cfg, ReferenceConfig):
+        raise ConfigError(f"config={cfg!r} must be a ReferenceConfig")
     check_int("workers", workers, 1)
+    if not all(isinstance(s, Scenario) for s in scenarios):
+        raise ConfigError("scenarios must be soaring_env.scenario.Scenario objects")
     names = [s.name for s in scenarios]
     if len(set(names)) != len(names):
         raise ConfigError(f"scenario names must be distinct (they name the files); got {names!r}")
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    with DirLock(out, "reference run"):
+    with DirLock(out, "reference run"):  # refuses a file; creates the folder
         todo = [s for s in scenarios if fresh or not _is_current(reference_path(out, s.name), s, samplers, cfg)]
         done = len(scenarios) - len(todo)
         if done and progress:

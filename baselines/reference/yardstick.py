@@ -142,7 +142,13 @@ def compute_reference(
     :param model_kwargs: further :class:`SoaringModel` arguments (aircraft, library, ...).
     :param progress: called as ``progress(stage, depth, max_edges)`` (stage e.g. ``"primitive/direct"``).
     """
+    if not isinstance(scenario, Scenario):
+        raise ConfigError(f"scenario={scenario!r} must be a soaring_env.scenario.Scenario")
+    if isinstance(samplers, str) or not all(isinstance(s, str) for s in samplers) or len(samplers) == 0:
+        raise ConfigError(f"samplers={samplers!r} must be a non-empty sequence of {', '.join(map(repr, SAMPLERS))}")
     cfg = config if config is not None else ReferenceConfig()
+    if not isinstance(cfg, ReferenceConfig):
+        raise ConfigError(f"config={cfg!r} must be a ReferenceConfig")
     model = SoaringModel(scenario=scenario, **dict(model_kwargs or {}))
     direct_model = without_thermals(model)
     out: dict[str, SamplerReference] = {}
