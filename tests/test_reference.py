@@ -71,14 +71,14 @@ def tiny() -> SoaringModel:
 def test_search_finds_the_enumerated_optimum(tiny: SoaringModel, depth: int) -> None:
     exact = _enumerate(tiny, SUBSET, depth)
     assert math.isfinite(exact)
-    # cells of 1 cm and a beam wider than the tree: the search is exhaustive
+    # cells of 1 m x 0.2 m x 0.5 deg and a beam wider than the tree: the search is exhaustive
     cfg = ReferenceConfig(
         beam_width=len(SUBSET) ** depth,
         start_width=len(SUBSET) ** depth,
         max_edges=depth,
-        cell_size=0.01,
-        height_cell=0.01,
-        course_cells=4096,
+        cell_size=1.0,
+        height_cell=0.2,
+        course_cells=720,
         primitives=SUBSET,
     )
     res = search(tiny, "primitive", cfg)
@@ -334,3 +334,10 @@ def test_reference_figure(tmp_path) -> None:
     assert len(path) == len(times) and times[0] == 0.0
     png = plot_reference(ref, tmp_path / "tiny.png")
     assert png.stat().st_size > 10_000
+
+
+def test_too_fine_cells_or_too_wide_beams_are_refused(tiny: SoaringModel) -> None:
+    with pytest.raises(ConfigError, match="cell_size"):
+        search(tiny, "primitive", ReferenceConfig(cell_size=1e-4, height_cell=1e-4, course_cells=100_000))
+    with pytest.raises(ConfigError, match="beam_width"):
+        ReferenceConfig(beam_width=10**9)

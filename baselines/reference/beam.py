@@ -56,7 +56,7 @@ angle (the shallowest path angle that needs no thrust anywhere between the groun
 ceiling; without it a grid of fixed angles either burns fuel or wastes height).
 
 The search is exact up to the beam and the cells (a test checks it against exhaustive enumeration
-with cells of a few centimetres); ``beam_width`` is the one accuracy knob
+with cells of 1 m x 0.2 m x 0.5 deg); ``beam_width`` is the one accuracy knob
 (``scripts/reference.py --convergence`` shows the best cost as it is doubled).
 """
 
@@ -87,6 +87,8 @@ CONTINUOUS_TURNS_DEG = (0.0, 60.0, -60.0, 180.0, -180.0, 360.0, -360.0, 540.0, -
                         900.0, -900.0, 1080.0, -1080.0)  # fmt: skip
 CONTINUOUS_GAMMAS_DEG = (-45.0, -15.0, 0.0, 15.0, 45.0)
 
+#: Largest beam width: the children of one depth (width x controls) are held in memory at once.
+MAX_BEAM_WIDTH = 100_000
 _ROWS_PER_CALL = 32768  # rollouts per model call: bounds the (B, N, 4) output to ~30 MB
 
 
@@ -107,6 +109,8 @@ class ReferenceConfig:
         angle of each (airspeed, turn) pair is always added).
     :param primitives: restrict the primitive control set to these indices (None: all within the
         model's bank limit); for tests and ablations.
+    :param region_size: side of the squares of the beam's diversity quota [m].
+    :param region_quota: nodes per square taken first into the beam (0: no quota).
     """
 
     beam_width: int = 2000
@@ -126,6 +130,8 @@ class ReferenceConfig:
         check_positive("region_size", self.region_size)
         check_int("region_quota", self.region_quota, 0)
         check_int("beam_width", self.beam_width, 1)
+        if self.beam_width > MAX_BEAM_WIDTH:
+            raise ConfigError(f"beam_width={self.beam_width!r} is too large; allowed: 1..{MAX_BEAM_WIDTH}")
         check_int("start_width", self.start_width, 1)
         check_int("max_edges", self.max_edges, 1)
         check_positive("cell_size", self.cell_size)
@@ -360,6 +366,8 @@ class _Context:
             speeds = model.action_to_control(ctrls)[:, 0]
         else:
             speeds = model.library.table[:, COL_AIRSPEED]
+        speed_keys = np.unique(np.round(speeds, 9))
+        _check_cell_grid(model, cfg, len(speed_keys))
         return cls(
             problem=problem,
             ctrls=ctrls,
@@ -370,7 +378,7 @@ class _Context:
             h_cap=height_cap(model),
             per_metre=still_air_cost_per_metre(model, ctrls),
             lift=thermal_values(model, ctrls),
-            speed_keys=np.unique(np.round(speeds, 9)),
+            speed_keys=speed_keys,
         )
 
 
@@ -382,7 +390,7 @@ def _beam(
     problem, ctrls, cfg = ctx.problem, ctx.ctrls, ctx.cfg
     m = len(ctrls)
     gn, ge, gr = ctx.goal
-    g_top, h_cap, per_metre, lift, speed_keys = ctx.g_top, ctx.h_cap, ctx.per_metre, ctx.lift, ctx.speed_keys
+    g_top, h_cap, per_metre, lift = ctx.g_top, ctx.h_cap, ctx.per_metre, ctx.lift
     root = ctx.root
     # per-depth node arrays; node i of depth d has parent parents[d][i] in depth d - 1
     states = [root[None, :]]
@@ -437,7 +445,7 @@ def _beam(
         jk = j[keep]
         d_goal = np.maximum(np.hypot(ce[:, S_N] - gn, ce[:, S_E] - ge) - gr, 0.0)
         rank = jk + _cost_to_go_estimate(ce, d_goal, per_metre, g_top, lift, (gn, ge))
-        key = _cell_keys(ce, cfg, speed_keys)
+        key = _cell_keys(ce, cfg, ctx)
         # merge children of one cell: the lowest J (then lowest rank, then first) survives
         order = np.lexsort((np.arange(len(keep)), rank, jk, key))
         first = np.ones(len(order), dtype=bool)
@@ -559,16 +567,30 @@ def _select(
     return np.sort(cand[order[:width]])
 
 
-def _cell_keys(s: np.ndarray, cfg: ReferenceConfig, speed_keys: np.ndarray) -> np.ndarray:
-    """One int64 per state: (north, east, course, height, last-airspeed) cell, packed."""
+def _check_cell_grid(model: SoaringModel, cfg: ReferenceConfig, n_speeds: int) -> None:
+    """Check that the dominance grid over the domain can be numbered in 63 bits (north and east
+    cells within +-2^15 of the origin, height layers below 2^13, courses x speeds below 2^18)."""
+    b = model.scenario.bounds
+    reach = max(abs(b.north_min), abs(b.north_max), abs(b.east_min), abs(b.east_max)) / cfg.cell_size
+    if reach >= 2**15 - 1 or b.height_max / cfg.height_cell >= 2**13 - 1 or cfg.course_cells * (n_speeds + 1) >= 2**18:
+        raise ConfigError(
+            f"cell_size={cfg.cell_size!r}, height_cell={cfg.height_cell!r}, course_cells={cfg.course_cells!r} "
+            "make more cells than can be numbered for this domain; allowed: at most 2^15 cells from the origin "
+            "north and east, 2^13 height layers, course_cells x (airspeeds + 1) < 2^18"
+        )
+
+
+def _cell_keys(s: np.ndarray, cfg: ReferenceConfig, ctx: _Context) -> np.ndarray:
+    """One int64 per state: its (north, east, height, course, last-airspeed) cell, packed (the
+    ranges are checked by :func:`_check_cell_grid`)."""
+    nc = cfg.course_cells
     ni = np.floor(s[:, S_N] / cfg.cell_size).astype(np.int64) + (1 << 15)
     ei = np.floor(s[:, S_E] / cfg.cell_size).astype(np.int64) + (1 << 15)
-    ci = np.floor((s[:, S_CHI] + math.pi) / (2 * math.pi) * cfg.course_cells).astype(np.int64) % cfg.course_cells
+    ci = np.floor((s[:, S_CHI] + math.pi) / (2 * math.pi) * nc).astype(np.int64) % nc
     hi = np.floor(s[:, S_H] / cfg.height_cell).astype(np.int64)
-    vi = np.searchsorted(speed_keys, np.round(s[:, S_V], 9))
-    nv = len(speed_keys) + 1
-    # north, east < 2^16 cells each, height < 2^13 layers: fits in 63 bits for any sane config
-    return (((ni * (1 << 16) + ei) * (1 << 13) + hi) * cfg.course_cells + ci) * nv + vi
+    vi = np.searchsorted(ctx.speed_keys, np.round(s[:, S_V], 9))
+    nv = len(ctx.speed_keys) + 1
+    return (((ni * (1 << 16) + ei) * (1 << 13) + hi) * nc + ci) * nv + vi
 
 
 __all__ = ["ReferenceConfig", "SearchResult", "control_set", "glide_angle", "search", "still_air_cost_per_metre"]
