@@ -346,6 +346,8 @@ def run_evaluation(
             a = ep["agent"]
             if a in specs and old_settings.get(a) == _jsonable(specs[a].settings):
                 done[_key(a, ep["scenario"], ep["seed"])] = ep
+        if log is not None:
+            log(f"resuming: {len(done)} finished episodes with the same settings loaded from {res_path}")
     meta = {
         "schema": SCHEMA,
         "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),

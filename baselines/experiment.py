@@ -173,6 +173,8 @@ def run_experiment(cfg: ExperimentConfig, *, progress: bool = True, fresh: bool 
     :returns: all run records, ordered by planner and run.
     """
     done = {} if fresh else load_results(cfg)
+    if done and progress:
+        print(f"resuming: {len(done)} finished runs loaded from {cfg.out_dir / 'runs'}", flush=True)
     jobs = [
         {
             "planner": planner,
