@@ -71,7 +71,7 @@ from typing import Any
 
 import numpy as np
 
-from baselines.reference.bounds import height_cap
+from baselines.reference.bounds import height_cap, without_thermals
 from baselines.sst.core import EDGE_GOAL, EDGE_INVALID, EDGE_VALID, SSTResult, SSTStats
 from baselines.sst.plan import Plan, plan_from_result
 from baselines.sst.soaring import S_CHI, S_E, S_H, S_N, S_V, SAMPLERS, SoaringProblem
@@ -251,10 +251,10 @@ def still_air_cost_per_metre(model: SoaringModel, controls: np.ndarray) -> float
     without thermals, from the scenario's start height: g / (L/D) of the best zero-thrust glide in
     the continuous set, the cheapest of level powered flight and the fixed glides for the primitives.
     """
-    sc = model.scenario
-    still = dataclasses.replace(
-        model, scenario=sc.replace(field=dataclasses.replace(sc.field, thermals=(), wind_north=0.0, wind_east=0.0))
-    )
+    calm = without_thermals(model)
+    sc = calm.scenario
+    still_field = dataclasses.replace(sc.field, wind_north=0.0, wind_east=0.0)
+    still = dataclasses.replace(calm, scenario=sc.replace(field=still_field))
     problem = SoaringProblem(still, "primitive" if controls.shape[1] == 1 else "continuous")
     x = np.repeat(problem.root_state()[None, :], len(controls), axis=0)
     e = problem.propagate(x, controls)
