@@ -28,6 +28,7 @@ from typing import Any, Protocol, cast, runtime_checkable
 import gymnasium as gym
 import numpy as np
 
+from soaring_env._validation import ConfigError
 from soaring_env.primitives import COL_AIRSPEED, COL_CHI_DOT_1, COL_CHI_DOT_2, COL_FAMILY, COL_GAMMA, SPIRAL
 
 __all__ = ["Agent", "HeuristicAgent", "PPOAgent", "RandomAgent", "SSTPlannerAgent", "action_mask_of"]
@@ -307,14 +308,25 @@ class SSTPlannerAgent:
     :param max_iterations: iteration budget per planning call (None: time only; with an iteration
         budget alone the plans, and so the evaluation, are deterministic).
     :param name: label in results.
+    :param planner: the named planner configuration (``SST_CONFIGS``: ``"soaring"`` or ``"paper"``).
     """
 
     def __init__(
-        self, *, time_limit: float | None = 20.0, max_iterations: int | None = None, name: str = "sst"
+        self,
+        *,
+        time_limit: float | None = 20.0,
+        max_iterations: int | None = None,
+        name: str = "sst",
+        planner: str = "soaring",
     ) -> None:
+        from baselines.sst.soaring import SST_CONFIGS
+
+        if planner not in SST_CONFIGS:
+            raise ConfigError(f"planner={planner!r} is unknown; allowed: {', '.join(map(repr, SST_CONFIGS))}")
         self.name = name
         self.time_limit = time_limit
         self.max_iterations = max_iterations
+        self.config = SST_CONFIGS[planner]
         self.planner: Any = None
 
     def reset(self, env: gym.Env, seed: int | None = None) -> None:
@@ -322,7 +334,7 @@ class SSTPlannerAgent:
         from baselines.sst import SSTAgent
 
         self.planner = SSTAgent(
-            env, time_limit=self.time_limit, max_iterations=self.max_iterations, seed=int(seed or 0)
+            env, time_limit=self.time_limit, max_iterations=self.max_iterations, seed=int(seed or 0), config=self.config
         )
         self.planner.reset()
 

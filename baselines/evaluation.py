@@ -55,6 +55,8 @@ REFERENCE_AGENT = "sst-primitives"
 AGENT_NAMES = (
     "sst-primitives",
     "sst-continuous",
+    "sst-soaring-primitives",
+    "sst-soaring-continuous",
     "ppo-discrete",
     "ppo-masked",
     "ppo-continuous",
@@ -180,14 +182,24 @@ def agent_spec(name: str, config: EvalConfig) -> AgentSpec:
     """The :class:`AgentSpec` of agent ``name`` under ``config``; raises for unknown names."""
     check_agent_name(name)
     if name.startswith("sst-"):
-        sampler = "primitive" if name == "sst-primitives" else "continuous"
+        # "sst-primitives" / "sst-continuous": the paper's planner; "sst-soaring-*": the soaring one
+        sampler = "primitive" if name.endswith("primitives") else "continuous"
+        planner = "soaring" if name.startswith("sst-soaring-") else "paper"
         env_id = DISCRETE_ID if sampler == "primitive" else CONTINUOUS_ID
-        settings = {"sampler": sampler, "time_budget": config.sst_time_budget, "iterations": config.sst_iterations}
+        settings: dict[str, Any] = {
+            "sampler": sampler,
+            "time_budget": config.sst_time_budget,
+            "iterations": config.sst_iterations,
+        }
+        if planner != "paper":  # (the paper planner's records predate this key)
+            settings["planner"] = planner
 
         def make_sst() -> Any:
             from baselines.agents import SSTPlannerAgent
 
-            return SSTPlannerAgent(time_limit=config.sst_time_budget, max_iterations=config.sst_iterations, name=name)
+            return SSTPlannerAgent(
+                time_limit=config.sst_time_budget, max_iterations=config.sst_iterations, name=name, planner=planner
+            )
 
         return AgentSpec(name, env_id, make_sst, settings)
     if name in PPO_AGENTS:
@@ -596,8 +608,7 @@ def plot_boxes(results: Mapping[str, Any], png: str | Path) -> Path:
         (axes[2], "flight_time", 1.0, "flight time [s]"),
     ):
         data = [
-            [scale * e[key] for e in eps if e["agent"] == a and e["success"] and e.get(key) is not None]
-            for a in agents
+            [scale * e[key] for e in eps if e["agent"] == a and e["success"] and e.get(key) is not None] for a in agents
         ]
         ticks = [f"{a}\n({len(d)} ok)" for a, d in zip(agents, data, strict=True)]
         pos = [i for i, d in enumerate(data) if d]

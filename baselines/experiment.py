@@ -28,7 +28,7 @@ import numpy as np
 from baselines._runs import holds_dir_lock, progress_bar, watch_parent
 from baselines.reference.yardstick import ScenarioReference
 from baselines.sst.core import SSTError
-from baselines.sst.soaring import SAMPLERS, SoaringSSTConfig
+from baselines.sst.soaring import SAMPLERS, SST_CONFIGS, SoaringSSTConfig
 from soaring_env.scenario import Scenario, atomic_write_text, get_scenario
 
 #: The planners of the paper, in its order of discussion.
@@ -57,7 +57,7 @@ class ExperimentConfig:
     :param seed: seed of run 0; run r uses ``seed + r`` (for both planners).
     :param out_dir: where the per-run result files, the table and the figures go.
     :param scenario: the scenario (default: the paper scenario).
-    :param planner: planner settings (radii, distance weights, batch size).
+    :param planner: planner settings (default: the paper's planner, ``SST_CONFIGS["paper"]``).
     :param planners: which planners to run.
     """
 
@@ -67,7 +67,7 @@ class ExperimentConfig:
     seed: int = 0
     out_dir: Path = Path("results/paper")
     scenario: Scenario = field(default_factory=lambda: get_scenario("paper"))
-    planner: SoaringSSTConfig = field(default_factory=SoaringSSTConfig)
+    planner: SoaringSSTConfig = field(default_factory=lambda: SST_CONFIGS["paper"])
     planners: tuple[str, ...] = PLANNERS
 
     def __post_init__(self) -> None:

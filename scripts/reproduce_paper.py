@@ -12,6 +12,7 @@ written as soon as the run finishes, so an interrupted experiment resumes where 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import sys
 import time
@@ -21,7 +22,7 @@ from baselines._runs import check_cli_args
 from baselines.experiment import ExperimentConfig, make_figures, run_experiment, write_report
 from baselines.reference import load_reference, reference_path
 from baselines.sst.core import SSTError
-from baselines.sst.soaring import SoaringSSTConfig
+from baselines.sst.soaring import SST_CONFIGS, SoaringSSTConfig
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -48,8 +49,11 @@ def main(argv: list[str] | None = None) -> int:
     t_lim = args.time if args.time is not None else (5.0 if args.quick else 20.0)
     out = args.out if args.out is not None else Path("results/paper-quick" if args.quick else "results/paper")
     try:
-        planner = SoaringSSTConfig(
-            selection_radius=args.selection_radius, pruning_radius=args.pruning_radius, batch_size=args.batch_size
+        planner = dataclasses.replace(  # the paper's planner: uniform samplers, no bound, no completions
+            SST_CONFIGS["paper"],
+            selection_radius=args.selection_radius,
+            pruning_radius=args.pruning_radius,
+            batch_size=args.batch_size,
         )
         cfg = ExperimentConfig(
             runs=runs, time_limit=t_lim, workers=args.workers, seed=args.seed, out_dir=out, planner=planner

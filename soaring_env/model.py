@@ -207,6 +207,31 @@ class SoaringModel:
         bank = np.arctan(t[:, 1:2] * np.abs(t[:, 3:5]) / 9.80665).max(axis=1)
         return bank <= math.radians(self.max_bank_deg) + 1e-12
 
+    def end_height_cap(self) -> float:
+        """Highest height [m] at which any plan can end: the end of its goal edge.
+
+        The env charges the goal edge to its end (Ts), after its first point inside the goal
+        region, so a plan ends at most ``w_max (Ts - Ts/N)`` above the goal's top, where ``w_max``
+        bounds the updraft of any thermal that can reach the goal region within one edge (no thermal
+        near the goal: the goal's top). Powered climbing does not count: it costs more fuel energy
+        than the height it gains, which is what makes ``-g (cap - h)`` an admissible bound on the
+        cost still to go from height h (used by the planners and the reference search).
+        """
+        sc = self.scenario
+        g = sc.goal
+        f = sc.field
+        top = g.height + g.radius
+        if not f.thermals:
+            return min(top, sc.bounds.height_max)
+        lib = self.library
+        reach = (float(self.control_high[0]) + math.hypot(f.wind_north, f.wind_east)) * lib.duration
+        infl = f.influence_radius()
+        w_max = 0.0
+        for t, r in zip(f.thermals, infl, strict=True):
+            if f.drift or math.hypot(t.north - g.north, t.east - g.east) <= g.radius + reach + r:
+                w_max = max(w_max, 1.2 * t.strength)  # |updraft| <= 1.2 w* (as in the rollout kernel)
+        return min(top + w_max * (lib.duration - lib.duration / lib.n_points), sc.bounds.height_max)
+
     @property
     def n_primitives(self) -> int:
         return N_PRIMITIVES

@@ -177,8 +177,9 @@ def test_glide_angle_needs_no_thrust_and_is_the_shallowest(tiny: SoaringModel) -
         gam = glide_angle(tiny, v, w, 1500.0)
         bank = math.atan(v * w / G)
         h = np.array([0.0, 1500.0])
-        assert np.all(ac.thrust(v, gam, bank, h) == 0.0)
-        assert np.any(ac.thrust(v, gam + 1e-6, bank, h) > 0.0)
+        # zero up to the last bits (the glide kernel and thrust() contract operations differently)
+        assert np.all(ac.thrust(v, gam, bank, h) <= 1e-12)
+        assert np.any(ac.thrust(v, gam + 1e-6, bank, h) > 1e-9)
 
 
 def test_continuous_control_set_holds_exact_float32_actions_and_glides(tiny: SoaringModel) -> None:

@@ -3,6 +3,7 @@ bad input, and budgets without a solution."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -18,6 +19,7 @@ from baselines.sst import (
     make_planner,
     plan_soaring,
 )
+from baselines.sst.soaring import SST_CONFIGS
 from soaring_env.model import GOAL, SoaringModel
 from soaring_env.scenario import GoalRegion, paper_scenario
 
@@ -105,17 +107,25 @@ def test_same_seed_same_plan(kind: str, model: SoaringModel) -> None:
     assert a.plan.to_dict() != c.plan.to_dict() or a.stats.active != c.stats.active
 
 
-@pytest.mark.parametrize("kind", SAMPLERS)
-def test_batched_k1_equals_reference_on_soaring(kind: str, model: SoaringModel) -> None:
-    cfg = SoaringSSTConfig(batch_size=1)
-    _, fast = make_planner(model, kind, config=cfg, seed=2)
-    _, ref = make_planner(model, kind, config=cfg, seed=2, reference=True)
-    fast.run(max_iterations=1500)
-    ref.run(max_iterations=1500)
+def assert_k1_equals_reference(
+    model: SoaringModel, kind: str, cfg: SoaringSSTConfig, seed: int, iterations: int
+) -> None:
+    """The batched core with K = 1 and the plain ReferenceSST build the same tree."""
+    _, fast = make_planner(model, kind, config=cfg, seed=seed)
+    _, ref = make_planner(model, kind, config=cfg, seed=seed, reference=True)
+    fast.run(max_iterations=iterations)
+    ref.run(max_iterations=iterations)
     ta, tb = fast.tree(), ref.tree()
     assert np.array_equal(ta.states, tb.states, equal_nan=True)
     assert np.array_equal(ta.cost, tb.cost) and np.array_equal(ta.parent, tb.parent)
     assert fast.stats.best_cost == ref.stats.best_cost
+    assert fast.stats.bounded == ref.stats.bounded
+
+
+@pytest.mark.parametrize("kind", SAMPLERS)
+def test_batched_k1_equals_reference_on_soaring(kind: str, model: SoaringModel) -> None:
+    cfg = dataclasses.replace(SST_CONFIGS["paper"], batch_size=1)  # the published algorithm
+    assert_k1_equals_reference(model, kind, cfg, seed=2, iterations=1500)
 
 
 def test_plan_round_trips_through_json(plans: dict[str, Plan]) -> None:
@@ -126,10 +136,11 @@ def test_plan_round_trips_through_json(plans: dict[str, Plan]) -> None:
 
 
 def test_no_solution_within_budget_is_a_result(model: SoaringModel) -> None:
-    res = plan_soaring(model, "primitive", max_iterations=20, seed=0)
+    paper = SST_CONFIGS["paper"]  # the soaring configuration's first goal completion often solves it
+    res = plan_soaring(model, "primitive", max_iterations=20, seed=0, config=paper)
     assert not res.plan.solved and len(res.plan) == 0 and math.isinf(res.stats.best_cost)
     assert res.stats.iterations == 20 and res.stats.active >= 1
-    part = plan_soaring(model, "primitive", max_iterations=300, seed=0, partial=True)
+    part = plan_soaring(model, "primitive", max_iterations=300, seed=0, partial=True, config=paper)
     assert not part.plan.solved and len(part.plan) >= 1
     g = model.scenario.goal
     d_end = g.distance(*part.plan.states[-1][[0, 1, 3]])

@@ -215,25 +215,9 @@ def control_set(model: SoaringModel, sampler: str, config: ReferenceConfig) -> n
 
 def glide_angle(model: SoaringModel, airspeed: float, chi_dot: float, height_max: float) -> float:
     """The shallowest path angle [rad] at which steady flight at ``airspeed`` [m/s] and course rate
-    ``chi_dot`` [rad/s] needs no thrust at any height in [0, ``height_max``] m.
-
-    Thrust is ``a rho + b / rho + c(gamma)``, convex in the density rho, so it is zero on the whole
-    height range when it is zero at both ends; bisection on gamma.
-    """
-    ac = model.aircraft
-    bank = math.atan(airspeed * chi_dot / G)
-    heights = np.array([0.0, min(height_max, 10999.0)])
-
-    def needs_thrust(gam: float) -> bool:
-        return bool(np.any(ac.thrust(airspeed, gam, bank, heights) > 0.0))
-
-    lo, hi = -math.pi / 4, 0.0
-    if needs_thrust(lo):
-        return lo  # no glide within the envelope; the steepest angle is the closest
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (lo, mid) if needs_thrust(mid) else (mid, hi)
-    return lo
+    ``chi_dot`` [rad/s] needs no thrust at any height in [0, ``height_max``] m
+    (:meth:`~soaring_env.physics.aircraft.Aircraft.glide_angle`)."""
+    return float(model.aircraft.glide_angle(airspeed, chi_dot, min(height_max, 10999.0)))
 
 
 def _action_at_most(model: SoaringModel, v: float, chi_dot: float, gamma: float) -> np.ndarray:

@@ -28,22 +28,8 @@ MIN_GAP = 25.0
 
 
 def height_cap(model: SoaringModel) -> float:
-    """Highest height [m] a plan can end at, for the bound (module docstring)."""
-    sc = model.scenario
-    g = sc.goal
-    f = sc.field
-    top = g.height + g.radius
-    if not f.thermals:
-        return min(top, sc.bounds.height_max)
-    lib = model.library
-    reach = (float(model.control_high[0]) + math.hypot(f.wind_north, f.wind_east)) * lib.duration
-    infl = f.influence_radius()
-    w_max = 0.0
-    for t, r in zip(f.thermals, infl, strict=True):
-        near = f.drift or math.hypot(t.north - g.north, t.east - g.east) <= g.radius + reach + r
-        if near:
-            w_max = max(w_max, 1.2 * t.strength)  # |updraft| <= 1.2 w* (as in the rollout kernel)
-    return min(top + w_max * (lib.duration - lib.duration / lib.n_points), sc.bounds.height_max)
+    """Highest height [m] a plan can end at, for the bound (:meth:`SoaringModel.end_height_cap`)."""
+    return model.end_height_cap()
 
 
 def lower_bound(model: SoaringModel) -> float:

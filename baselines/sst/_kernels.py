@@ -45,7 +45,8 @@ C_DEACT = 12  # nodes made inactive by a cheaper node at their witness
 C_FALLBACK = 13  # selections with no active node within delta_BN (nearest node taken)
 C_TOO_DEEP = 14  # non-goal children at the depth limit (they could never reach the goal in time)
 C_PEND = 15  # slots freed in the current round (reusable only from the next round on)
-N_COUNTERS = 16
+C_BOUNDED = 16  # children whose lower bound on a solution through them cannot beat the best one
+N_COUNTERS = 17
 
 
 #: The 27 cell offsets around a cell, nearest first (the cell itself, faces, edges, corners).
@@ -291,6 +292,7 @@ def insert_batch(
     ecost,
     edur,
     outcome,
+    togo,
     X,
     U,
     cost,
@@ -326,9 +328,17 @@ def insert_batch(
     pend,
     best_cost,
     imp_k,
+    out_ids,
+    chain,
 ) -> int:
     """Insert the children of one batch in order; returns how many improved the best solution
-    (their batch positions are written to ``imp_k``). See :class:`baselines.sst.core.SST`.
+    (their batch positions are written to ``imp_k``). ``out_ids[k]`` receives the node id of child
+    k if it was accepted as an active node, else -1. See :class:`baselines.sst.core.SST`.
+
+    ``chain=True`` inserts a path that ends in a better solution (a goal completion): row k > 0 is
+    the child of row k - 1 (``sel[0]`` is the first parent, active or inactive), no cost bound
+    applies, and a row its witness dominates becomes an *inactive* node (kept as an ancestor of
+    the solution, as SST keeps inactive nodes with descendants) instead of being rejected.
 
     Slots freed during the round are reused only from the next round on: a child whose selected
     parent was removed earlier in the round must find the slot FREE (stale), never reoccupied.
@@ -336,12 +346,13 @@ def insert_batch(
     n_imp = 0
     m = mscale.shape[0]
     for k in range(sel.shape[0]):
+        out_ids[k] = -1
         oc = outcome[k]
         if oc == EDGE_INVALID:
             cnt[C_INVALID] += 1
             continue
-        p = sel[k]
-        if status[p] != ACTIVE:
+        p = out_ids[k - 1] if chain and k > 0 else sel[k]
+        if p < 0 or not (status[p] == ACTIVE or (chain and status[p] == INACTIVE)):
             cnt[C_STALE] += 1
             continue
         c_new = cost[p] + ecost[k]
@@ -367,6 +378,9 @@ def insert_batch(
         if depth[p] + 1 >= max_depth:
             cnt[C_TOO_DEEP] += 1
             continue
+        if not chain and c_new + togo[k] >= best_cost[0]:
+            cnt[C_BOUNDED] += 1
+            continue
         w = nearest_witness(NX, k, W, xdims, wdims, mscale, mperiod, gax, w_g0, w_cs, w_gn, whead, wnext, ws2)
         if w < 0:
             w = cnt[C_WIT]
@@ -380,6 +394,14 @@ def insert_batch(
         peer = wrep[w]
         if peer >= 0 and not c_new < cost[peer]:
             cnt[C_DOMINATED] += 1
+            if chain:  # an inactive ancestor of the completion's solution
+                node = _alloc(cnt, free)
+                _write_node(node, p, k, c_new, NX, NU, ecost, edur, X, U, cost, tcome, ecost_arr, parent, depth)
+                nchild[node] = 0
+                nchild[p] += 1
+                status[node] = INACTIVE
+                cnt[C_INACT] += 1
+                out_ids[k] = node
             continue
         node = _alloc(cnt, free)
         _write_node(node, p, k, c_new, NX, NU, ecost, edur, X, U, cost, tcome, ecost_arr, parent, depth)
@@ -390,6 +412,7 @@ def insert_batch(
         cnt[C_ACT] += 1
         cnt[C_ACCEPT] += 1
         wrep[w] = node
+        out_ids[k] = node
         if peer >= 0:
             # the displaced representative becomes inactive ...
             grid_remove(peer, head, nxt, prv, cell)

@@ -12,7 +12,8 @@ The core knows nothing about aircraft. It sees a :class:`Problem`:
 The algorithm (the paper's Algorithm 6 with its subroutines, ``Best_First_Selection_SST``,
 ``MonteCarlo-Prop``, ``Is_Node_Locally_the_Best_SST`` and ``Prune_Dominated_Nodes_SST``):
 
-1. draw a random point of the state space; among the *active* nodes within the selection radius
+1. draw a random point of the state space (uniform over its box, or from the problem's own
+   ``sample_targets(rng, n)`` where it has one); among the *active* nodes within the selection radius
    delta_BN pick the one with the lowest cost-to-come (none within delta_BN: the nearest active
    node);
 2. propagate it with one randomly sampled control (Monte-Carlo propagation);
@@ -32,9 +33,12 @@ stay only as long as they have descendants, and the tree stays sparse. OMPL's cu
 deactivates nodes in its pruning loop; this implementation follows the paper.
 
 Costs. Edge costs may be negative (a thermal can return more energy than the motor spends).
-Nothing here assumes otherwise: selection and dominance compare costs-to-come, and no branch is
-ever pruned by a cost bound (which would need a non-negative cost-to-go). The best solution is the
-lowest-cost goal edge found so far; it can only improve.
+Nothing here assumes otherwise: selection and dominance compare costs-to-come. A problem may give,
+with every edge, an admissible lower bound on the cost still to go from its end state
+(``Edges.togo``; it may be negative); then a child whose cost-to-come plus that bound cannot beat
+the best solution is dropped before it is inserted (branch and bound: no solution better than the
+best one is lost, so this keeps every property of SST). The best solution is the lowest-cost goal
+edge found so far; it can only improve.
 
 Batching. :class:`SST` expands ``batch_size`` (K) nodes per round: it draws K targets, selects K
 nodes against the tree as it stands at the start of the round, propagates the K edges in one call
@@ -178,12 +182,16 @@ class Edges:
     :param cost: edge cost (n,), any real number (negative allowed).
     :param duration: edge duration (n,) (e.g. flight time [s]); summed along a solution path.
     :param outcome: (n,) ints: ``EDGE_VALID``, ``EDGE_GOAL`` or ``EDGE_INVALID``.
+    :param togo: optional (n,) admissible lower bound on the cost still to go from each end state to
+        the goal (``-inf``: none). A child with cost-to-come + ``togo`` >= the best solution's cost
+        can lead to no better solution and is dropped (counted as ``bounded``); None: no bound.
     """
 
     states: np.ndarray
     cost: np.ndarray
     duration: np.ndarray
     outcome: np.ndarray
+    togo: np.ndarray | None = None
 
 
 @runtime_checkable
@@ -216,6 +224,10 @@ class SSTParams:
     :param max_depth: most edges a solution may have (None: unlimited); a non-goal child at this
         depth is dropped (counted as ``too_deep``), since it could only lead to longer solutions.
     :param initial_capacity: initial node/witness array size (grows by doubling).
+    :param completions: greedy goal completions per round (0: none, the published algorithm): the
+        ``completions`` cheapest children accepted in a round are each continued with the problem's
+        ``goal_controls`` (a steering rule towards the goal) for up to ``completion_depth`` edges.
+    :param completion_depth: most edges of one completion.
     """
 
     selection_radius: float = 1.0
@@ -223,6 +235,8 @@ class SSTParams:
     batch_size: int = 256
     max_depth: int | None = None
     initial_capacity: int = 4096
+    completions: int = 0
+    completion_depth: int = 10
 
     def __post_init__(self) -> None:
         _positive("selection_radius", self.selection_radius)
@@ -231,6 +245,8 @@ class SSTParams:
         if self.max_depth is not None:
             _int("max_depth", self.max_depth, 1)
         _int("initial_capacity", self.initial_capacity, 16)
+        _int("completions", self.completions, 0, 1 << 20)
+        _int("completion_depth", self.completion_depth, 1, 1 << 20)
 
     @property
     def depth_limit(self) -> int:
@@ -262,6 +278,8 @@ class SSTStats:
     deactivated: int = 0
     fallbacks: int = 0
     too_deep: int = 0
+    bounded: int = 0
+    completion_edges: int = 0
     best_cost: float = math.inf
     best_duration: float = math.nan
     time_to_first_solution: float | None = None
@@ -362,6 +380,7 @@ class SST:
         self._a["head"] = np.full(int(np.prod(self._a_grid[2])), -1, np.int64)
         self._w["head"] = np.full(int(np.prod(self._w_grid[2])), -1, np.int64)
         self.stats = SSTStats(batch_size=self.params.batch_size)
+        self._accepted = np.full(self.params.batch_size, -1, np.int64)  # node ids of the last insert
         self._init_root()
 
     # --- set-up -----------------------------------------------------------------------------
@@ -474,6 +493,14 @@ class SST:
         done = 0
         imp_k = np.zeros(kk, np.int64)
         a, w = self._a, self._w
+        if self.stats.iterations == 0 and self.params.completions:
+            self._accepted[:] = -1
+            self._accepted[0] = 0  # the first completion starts at the root
+            n_imp = self._complete()
+            self.stats.elapsed = base_elapsed + (time.perf_counter() - t_start)
+            if n_imp:
+                self._record_improvement()
+            self._sync_stats()
         while True:
             n = kk if n_lim is None else min(kk, n_lim - done)
             if n <= 0:
@@ -482,7 +509,7 @@ class SST:
                 self._alloc_nodes(2 * len(a["cost"]) + n)
             if self._cnt[K.C_WIT] + n + 1 > len(w["rep"]):
                 self._alloc_witnesses(2 * len(w["rep"]) + n)
-            q = self.space.sample(self.rng, n)
+            q = self._targets(n)
             sel = np.empty(n, np.int64)
             g0, cs, gn = self._a_grid
             self._cnt[K.C_FALLBACK] += K.select_batch(
@@ -507,6 +534,8 @@ class SST:
             n_imp = self._insert(sel, e, u, imp_k)
             done += n
             self.stats.iterations += n
+            if self.params.completions:
+                n_imp += self._complete()
             now = time.perf_counter()
             self.stats.elapsed = base_elapsed + (now - t_start)
             if n_imp:
@@ -518,8 +547,131 @@ class SST:
                 break
         return self.result()
 
-    def _insert(self, sel: np.ndarray, e: Edges, u: np.ndarray, imp_k: np.ndarray) -> int:
+    def _targets(self, n: int) -> np.ndarray:
+        """n selection targets: the problem's own ``sample_targets`` if it has one, else uniform."""
+        f = getattr(self.problem, "sample_targets", None)
+        if f is None:
+            return self.space.sample(self.rng, n)
+        q = np.asarray(f(self.rng, n), np.float64)
+        if q.shape != (n, len(self.space.dims)) or not np.all(np.isfinite(q)):
+            raise SSTError(
+                f"sample_targets returned shape {q.shape} or non-finite values; expected ({n}, {len(self.space.dims)})"
+            )
+        return q
+
+    def _complete(self) -> int:
+        """Greedy goal completions from the cheapest children accepted in the last round.
+
+        Each is flown on with ``problem.goal_controls`` (a steering rule) for up to
+        ``completion_depth`` edges, all completions in lockstep, until it reaches the goal, turns
+        invalid or hits the depth limit. Its edges are then inserted under the usual rules (witness
+        dominance, the depth limit, the cost bound) until one is rejected -- so the random
+        expansions can build on them. If the cheapest completion that reached the goal beats the
+        best solution but was cut off by a dominated edge, its remaining edges are inserted as a
+        path to the new solution, the dominated ones as inactive nodes (``chain`` mode of
+        ``insert_batch``). Extra nodes only: the random expansions go on unchanged, so SST's
+        guarantees are kept. Returns how many insertions improved the best solution.
+        """
+        steer = getattr(self.problem, "goal_controls", None)
+        if steer is None:
+            return 0
+        a = self._a
+        ids = self._accepted[self._accepted >= 0]
+        if len(ids) == 0:
+            return 0
+        ids = ids[np.argsort(a["cost"][ids], kind="stable")[: self.params.completions]]
+        ids = ids[a["status"][ids] == K.ACTIVE]
+        m, depth = len(ids), self.params.completion_depth
+        if m == 0:
+            return 0
+        # 1. fly the completions (no tree changes)
+        xs = np.zeros((m, depth, self._dim))
+        us = np.zeros((m, depth, self._cdim))
+        ec = np.zeros((m, depth))
+        du = np.zeros((m, depth))
+        oc = np.full((m, depth), K.EDGE_INVALID, np.int64)
+        tg = np.full((m, depth), -np.inf)
+        length = np.zeros(m, np.int64)
+        x = a["X"][ids].copy()
+        x0 = x.copy()
+        live = np.arange(m)
+        d0 = a["depth"][ids]
+        for d in range(depth):
+            u = np.asarray(steer(x), np.float64).reshape(len(live), self._cdim)
+            e = self.problem.propagate(x, u)
+            self.stats.iterations += len(live)
+            self.stats.completion_edges += len(live)
+            xs[live, d], us[live, d], ec[live, d] = e.states, u, e.cost
+            du[live, d], oc[live, d], tg[live, d] = e.duration, e.outcome, _togo(e)
+            length[live] = d + 1
+            go = (e.outcome == K.EDGE_VALID) & (d0[live] + d + 1 < self.params.depth_limit)
+            live, x = live[go], np.asarray(e.states)[go]
+            if len(live) == 0:
+                break
+        # 2. insert them under the usual rules, in lockstep, each until its first rejected edge
+        n_imp = 0
+        nodes = np.full((m, depth), -1, np.int64)
+        cur = ids.copy()
+        alive = np.ones(m, bool)
+        for d in range(depth):
+            # a parent freed by the previous call is no longer a node (its slot may be reused in
+            # this call): only chains whose parent is still active go on
+            alive &= a["status"][cur] == K.ACTIVE
+            rows = np.flatnonzero(alive & (length > d))
+            if len(rows) == 0:
+                break
+            self._grow(len(rows))
+            e = Edges(xs[rows, d], ec[rows, d], du[rows, d], oc[rows, d], tg[rows, d])
+            n_imp += self._insert(cur[rows], e, us[rows, d], np.zeros(len(rows), np.int64))
+            got = self._accepted[: len(rows)].copy()
+            nodes[rows, d] = got
+            cur[rows] = got
+            alive[rows] = got >= 0
+        # 3. the cheapest completion that reached the goal, if it beats the best solution still
+        last = length - 1
+        reached = oc[np.arange(m), last] == K.EDGE_GOAL
+        if reached.any():
+            total = a["cost"][ids] + np.where(np.arange(depth)[None, :] < length[:, None], ec, 0.0).sum(axis=1)
+            c = int(np.flatnonzero(reached)[np.argmin(total[reached])])
+            if total[c] < self._best_cost[0]:
+                # start after the deepest edge of it that is still in the tree
+                # (still the same node: a freed slot may hold another one by now)
+                come = a["cost"][ids[c]] + np.cumsum(ec[c])
+                start, parent = 0, int(ids[c])
+                if a["status"][parent] not in (K.ACTIVE, K.INACTIVE) or not np.array_equal(
+                    a["X"][parent], x0[c], equal_nan=True
+                ):
+                    return n_imp
+                for d in range(int(length[c]) - 1, -1, -1):
+                    q = int(nodes[c, d])
+                    if (
+                        q >= 0
+                        and a["status"][q] in (K.ACTIVE, K.INACTIVE)
+                        and a["cost"][q] == come[d]
+                        and np.array_equal(a["X"][q], xs[c, d], equal_nan=True)
+                    ):
+                        start, parent = d + 1, q
+                        break
+                k = slice(start, int(length[c]))
+                n = int(length[c]) - start
+                self._grow(n)
+                e = Edges(states=xs[c, k], cost=ec[c, k], duration=du[c, k], outcome=oc[c, k])
+                sel = np.full(n, parent, np.int64)
+                n_imp += self._insert(sel, e, us[c, k], np.zeros(n, np.int64), chain=True)
+        return n_imp
+
+    def _grow(self, n: int) -> None:
+        """Make room for n more nodes and witnesses."""
+        if self._cnt[K.C_USED] + n + 1 > len(self._a["cost"]):
+            self._alloc_nodes(2 * len(self._a["cost"]) + n)
+        if self._cnt[K.C_WIT] + n + 1 > len(self._w["rep"]):
+            self._alloc_witnesses(2 * len(self._w["rep"]) + n)
+
+    def _insert(self, sel: np.ndarray, e: Edges, u: np.ndarray, imp_k: np.ndarray, chain: bool = False) -> int:
         a, w = self._a, self._w
+        if len(self._accepted) < len(sel):
+            self._accepted = np.empty(max(len(sel), self.params.batch_size), np.int64)
+        self._accepted[len(sel) :] = -1
         ag0, acs, agn = self._a_grid
         wg0, wcs, wgn = self._w_grid
         return int(
@@ -530,6 +682,7 @@ class SST:
                 np.ascontiguousarray(e.cost, dtype=np.float64),
                 np.ascontiguousarray(e.duration, dtype=np.float64),
                 np.ascontiguousarray(e.outcome, dtype=np.int64),
+                _togo(e),
                 a["X"],
                 a["U"],
                 a["cost"],
@@ -565,6 +718,8 @@ class SST:
                 a["pend"],
                 self._best_cost,
                 imp_k,
+                self._accepted,
+                chain,
             )
         )
 
@@ -590,6 +745,7 @@ class SST:
         s.deactivated = int(c[K.C_DEACT])
         s.fallbacks = int(c[K.C_FALLBACK])
         s.too_deep = int(c[K.C_TOO_DEEP])
+        s.bounded = int(c[K.C_BOUNDED])
         s.best_cost = float(self._best_cost[0])
         best = int(c[K.C_BEST])
         s.best_duration = float(self._a["tcome"][best]) if best >= 0 else math.nan
@@ -659,6 +815,17 @@ class SST:
             witnesses=self._w["W"][:nw].copy(),
             witness_rep=self._w["rep"][:nw].copy(),
         )
+
+
+def _togo(e: Edges) -> np.ndarray:
+    """The edges' cost-to-go bounds as a float64 array (``-inf`` where the problem gives none)."""
+    n = len(e.cost)
+    if e.togo is None:
+        return np.full(n, -np.inf)
+    t = np.ascontiguousarray(e.togo, dtype=np.float64)
+    if t.shape != (n,) or np.any(np.isnan(t)):
+        raise SSTError(f"Edges.togo has shape {t.shape} or NaN; expected ({n},) numbers (-inf: no bound)")
+    return t
 
 
 @dataclass(frozen=True)

@@ -166,6 +166,8 @@ def make_planner(
         pruning_radius=cfg.pruning_radius,
         batch_size=cfg.batch_size,
         max_depth=cfg.max_edges,
+        completions=cfg.completions,
+        completion_depth=cfg.completion_depth,
     )
     planner: SST | ReferenceSST = (ReferenceSST if reference else SST)(problem, params, seed=seed)
     return problem, planner

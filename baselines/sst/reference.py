@@ -32,6 +32,11 @@ class ReferenceSST:
             raise SSTError(f"problem={problem!r} does not implement the Problem protocol")
         self.problem = problem
         self.params = params or SSTParams()
+        if self.params.completions:
+            raise SSTError(
+                f"completions={self.params.completions!r}: ReferenceSST is the published algorithm; the goal "
+                "completions are an extension of the batched SST only; allowed: 0"
+            )
         self.rng = np.random.default_rng(check_seed("seed", seed))
         sp = problem.space
         self.space = sp
@@ -124,7 +129,8 @@ class ReferenceSST:
             self._grow()
         s = self.stats
         # Best_First_Selection_SST
-        q = self.space.sample(self.rng, 1)[0]
+        f = getattr(self.problem, "sample_targets", None)
+        q = (self.space.sample(self.rng, 1) if f is None else np.asarray(f(self.rng, 1), np.float64))[0]
         act = np.flatnonzero(self.status[: self.used] == K.ACTIVE)
         d2 = self._d2(self.X[act][:, self._dims], q)
         near = act[d2 <= self.params.selection_radius**2]
@@ -161,6 +167,9 @@ class ReferenceSST:
             return False
         if self.depth[sel] + 1 >= self.params.depth_limit:
             s.too_deep += 1
+            return False
+        if e.togo is not None and c_new + float(e.togo[0]) >= s.best_cost:
+            s.bounded += 1
             return False
         # Is_Node_Locally_the_Best_SST
         dw = self._d2(self.W[: self.n_w], x_new[self._dims])

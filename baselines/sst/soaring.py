@@ -10,13 +10,17 @@ as in the env). Only ``Pn, Pe, h, chi`` enter the distance:
 
 with ``wrap`` taking the course difference into [-pi, pi] and ``heading_scale`` in m/rad (default
 100 m/rad: a half-turn counts as 314 m, about one 10 m/s primitive). Selection targets are drawn
-uniformly over the flight domain (north, east, height) and all courses.
+uniformly over the flight domain (north, east, height) and all courses (a ``thermal_targets`` share
+of them over the thermals, off by default).
 
-Controls: ``"primitive"`` -- an index into the 174 primitives, drawn uniformly (by default only
-among those within the model's bank limit, ``model.bank_ok()``); ``"continuous"`` -- a normalized
-action in [-1, 1]^3 drawn uniformly and mapped by ``model.action_to_control`` onto the envelope of
-the primitives ((v_a, chi_dot, gamma) in [10, 20] m/s x +-1080 deg/Ts x +-45 deg), held for Ts.
-Both are exactly the actions of the discrete and continuous envs.
+Controls: ``"primitive"`` -- an index into the 174 primitives (by default only among those within
+the model's bank limit, ``model.bank_ok()``); ``"continuous"`` -- a normalized action in [-1, 1]^3
+mapped by ``model.action_to_control`` onto the envelope of the primitives ((v_a, chi_dot, gamma) in
+[10, 20] m/s x +-1080 deg/Ts x +-45 deg), held for Ts. Both are exactly the actions of the discrete
+and continuous envs. The paper's planner (``SST_CONFIGS["paper"]``) draws them uniformly; the
+soaring configuration (the default) mixes in zero-thrust glides, adds the admissible cost bound and
+the greedy goal completions (glide to a thermal, climb, glide home) -- see
+:class:`SoaringSSTConfig` and :meth:`SoaringProblem.goal_controls`.
 
 An edge is propagated with the same calls ``env.step`` makes (``model.rollout_primitive`` or
 ``model.rollout_control`` with ``t0`` and ``airspeed_prev``, then ``model.classify``): its cost is
@@ -33,9 +37,18 @@ import numpy as np
 
 from baselines.sst.core import EDGE_GOAL, EDGE_INVALID, EDGE_VALID, Edges, SSTError, StateSpace
 from baselines.sst.samplers import BoxSampler, IndexSampler
-from soaring_env._validation import as_float_array, check_bool, check_finite, check_int, check_positive
+from soaring_env._validation import (
+    ConfigError,
+    as_float_array,
+    check_bool,
+    check_finite,
+    check_int,
+    check_positive,
+    check_range,
+)
 from soaring_env.model import FLYING, GOAL, SoaringModel
-from soaring_env.primitives import COL_AIRSPEED
+from soaring_env.physics.atmosphere import G
+from soaring_env.primitives import COL_AIRSPEED, COL_CHI_DOT_1, COL_CHI_DOT_2, COL_GAMMA
 
 SAMPLERS = ("primitive", "continuous")
 #: Columns of the core's state vector.
@@ -46,11 +59,24 @@ S_N, S_E, S_CHI, S_H, S_T, S_V = range(6)
 class SoaringSSTConfig:
     """Planner settings for the soaring problem.
 
-    Defaults (chosen on the paper scenario, see the README): delta_s = 250 m, a little under half a
-    20 m/s primitive (600 m) and about one 10 m/s primitive's displacement in a turn; delta_BN =
-    2 delta_s, the ratio of OMPL's defaults; K = 1024 expansions per round (fast, and on the paper
-    scenario it found cheaper solutions than smaller rounds -- batching changes the search, see
-    :mod:`baselines.sst.core`; ``batch_size=1`` is the published one-at-a-time algorithm).
+    The defaults are the configuration that soars (``SST_CONFIGS["soaring"]``); ``SST_CONFIGS["paper"]``
+    is the paper's planner (uniform control samplers, no bound), kept unchanged for
+    ``scripts/reproduce_paper.py``. Each soaring setting earns its place in the README's ablation
+    table (``scripts/ablation_sst.py``).
+
+    Radii: delta_s = 250 m, a little under half a 20 m/s primitive (600 m) and about one 10 m/s
+    primitive's displacement in a turn; delta_BN = 2 delta_s, the ratio of OMPL's defaults.
+    K expansions per round: batching changes the search (see :mod:`baselines.sst.core`);
+    ``batch_size=1`` is the published one-at-a-time algorithm.
+
+    Control mixture (continuous sampler; the density stays positive over the whole envelope, so
+    SST's probabilistic completeness and asymptotic near-optimality are kept): each drawn action is
+    uniform, except that with probability ``glide_share`` its path angle is replaced by the
+    zero-thrust glide angle of its (airspeed, course rate) (:meth:`Aircraft.glide_angle`, rounded so
+    that no thrust is needed), and with probability ``circle_share`` its course rate is replaced by
+    one of a circle of radius uniform in ``circle_radius`` (clipped to the envelope) with a random
+    sign. The primitive sampler draws, with probability ``circle_share``, uniformly among the
+    circling primitives (turn radius within ``circle_radius``), else uniformly among all allowed.
 
     :param selection_radius: delta_BN [m] (in the distance of this module's docstring).
     :param pruning_radius: delta_s [m].
@@ -60,6 +86,16 @@ class SoaringSSTConfig:
     :param mask_primitives: draw only the primitives within the model's bank limit.
     :param max_edges: most edges (env steps) a plan may have, e.g. the env's ``max_episode_steps``
         (None: unlimited, as in the paper).
+    :param glide_share: probability of a zero-thrust glide path angle (continuous) [-].
+    :param circle_share: probability of a thermal-scale circle [-].
+    :param circle_radius: (smallest, largest) circle radius of those draws [m].
+    :param thermal_targets: share of SST's selection targets drawn over the thermals instead of
+        uniformly over the domain: (north, east) uniform in a disc of ``thermal_target_radius``
+        around a thermal's centre at the start time (picked uniformly), height and course uniform
+        (the uniform share keeps every region reachable) [-].
+    :param thermal_target_radius: radius of those discs [m].
+    :param cost_bound: drop children that cannot beat the best solution by the admissible bound
+        ``-g (h_cap - h)`` on the cost still to go (:meth:`SoaringModel.end_height_cap`).
     """
 
     selection_radius: float = 500.0
@@ -69,6 +105,14 @@ class SoaringSSTConfig:
     batch_size: int = 1024
     mask_primitives: bool = True
     max_edges: int | None = None
+    glide_share: float = 0.5
+    circle_share: float = 0.0
+    circle_radius: tuple[float, float] = (15.0, 60.0)
+    thermal_targets: float = 0.0
+    thermal_target_radius: float = 100.0
+    cost_bound: bool = True
+    completions: int = 8
+    completion_depth: int = 20
 
     def __post_init__(self) -> None:
         for name in ("selection_radius", "pruning_radius", "heading_scale", "height_scale"):
@@ -77,6 +121,29 @@ class SoaringSSTConfig:
         check_bool("mask_primitives", self.mask_primitives)
         if self.max_edges is not None:
             check_int("max_edges", self.max_edges, 1)
+        object.__setattr__(
+            self, "thermal_target_radius", check_positive("thermal_target_radius", self.thermal_target_radius)
+        )
+        for name in ("glide_share", "circle_share", "thermal_targets"):
+            object.__setattr__(self, name, check_range(name, getattr(self, name), 0.0, 1.0))
+        r = as_float_array("circle_radius", self.circle_radius)
+        if r.shape != (2,) or not (np.all(np.isfinite(r)) and 0.0 < r[0] <= r[1]):
+            raise ConfigError(
+                f"circle_radius={self.circle_radius!r} must be (smallest, largest) radii [m]; "
+                "allowed: 0 < smallest <= largest"
+            )
+        object.__setattr__(self, "circle_radius", (float(r[0]), float(r[1])))
+        check_bool("cost_bound", self.cost_bound)
+        check_int("completions", self.completions, 0, 1 << 20)
+        check_int("completion_depth", self.completion_depth, 1, 1 << 20)
+
+
+#: Named planner configurations: ``"paper"`` is the paper's SST (uniform samplers, no cost bound);
+#: ``"soaring"`` (the default) adds the measures of the README's ablation table.
+SST_CONFIGS: dict[str, SoaringSSTConfig] = {
+    "paper": SoaringSSTConfig(glide_share=0.0, circle_share=0.0, thermal_targets=0.0, cost_bound=False, completions=0),
+    "soaring": SoaringSSTConfig(),
+}
 
 
 class SoaringProblem:
@@ -138,21 +205,286 @@ class SoaringProblem:
             low=(b.north_min, b.east_min, 0.0, -math.pi),
             high=(b.north_max, b.east_max, b.height_max, math.pi),
         )
+        table = model.library.table
         if sampler == "primitive":
-            allowed = model.bank_ok() if cfg.mask_primitives else None
+            allowed = model.bank_ok() if cfg.mask_primitives else np.ones(model.n_primitives, bool)
             self.sampler: IndexSampler | BoxSampler = IndexSampler(model.n_primitives, allowed)
+            # circling primitives: every segment turns on a circle within the radius band
+            turn = np.minimum(np.abs(table[:, COL_CHI_DOT_1]), np.abs(table[:, COL_CHI_DOT_2]))
+            radius = table[:, COL_AIRSPEED] / np.maximum(turn, 1e-300)
+            circling = allowed & (radius >= cfg.circle_radius[0]) & (radius <= cfg.circle_radius[1])
+            self._circling = IndexSampler(model.n_primitives, circling) if circling.any() else None
             self.control_dim = 1
         else:
             self.sampler = BoxSampler(3)
+            self._circling = None
             self.control_dim = 3
-        self._airspeeds = model.library.table[:, COL_AIRSPEED]
+        self._airspeeds = table[:, COL_AIRSPEED]
+        self._h_cap = model.end_height_cap()
+        self._thermal_centres = sc.field.centres(t0)
+        self._t0 = t0
+        speeds = np.linspace(model.control_low[0], model.control_high[0], 41)
+        glide = model.aircraft.glide_angle(speeds, 0.0, b.height_max)
+        self._glide_speed = float(speeds[int(np.argmax(glide))])  # flattest zero-thrust glide
+        self._glide_angle = float(glide.max())
+        self._speeds, self._speed_glide = speeds, glide
+        # the completions climb until a glide at the circling airspeed reaches the goal (the
+        # primitives fly home level: their glides are steep)
+        self._tan_slow = 0.0 if sampler == "primitive" else math.tan(-float(glide[0]))
+        v_min = float(model.control_low[0])
+        self._circle_rate = min(v_min / cfg.circle_radius[0], float(model.control_high[1]))
+        self._circle_gamma = float(model.aircraft.glide_angle(v_min, self._circle_rate, b.height_max))
+        self._circle_sink = -v_min * math.sin(self._circle_gamma)  # [m/s]
+        # the arcs the completions circle on: 41 course rates over the envelope, or the rates of
+        # the slowest level single-segment primitives; "tight": +-3/4 and +-1 of the largest rate
+        # (primitives: the two largest of each sign)
+        top = float(model.control_high[1])
+        self._arc_rates = np.linspace(-top, top, 41)
+        if sampler == "primitive":
+            ok = np.flatnonzero(allowed & (table[:, COL_CHI_DOT_1] == table[:, COL_CHI_DOT_2]))
+            self._steer_ids = ok
+            self._steer_actions = np.clip(
+                model.control_to_action(table[ok][:, [COL_AIRSPEED, COL_CHI_DOT_1, COL_GAMMA]]), -1.0, 1.0
+            )
+            slow = ok[(table[ok, COL_AIRSPEED] == v_min) & (table[ok, COL_GAMMA] == 0.0)]
+            if len(slow):
+                self._arc_rates = np.unique(table[slow, COL_CHI_DOT_1])
+            level = allowed & (table[:, COL_GAMMA] == 0.0)
+            self._near_ids = np.flatnonzero(level if level.any() else allowed)
+        rates = self._arc_rates
+        self._tight_rates = np.array([-top, -0.75 * top, 0.75 * top, top])
+        if sampler == "primitive":
+            self._tight_rates = np.unique(
+                np.concatenate([np.sort(rates[rates < 0])[:2], np.sort(rates[rates > 0])[-2:]])
+            )
+        # sink of each arc at zero thrust [m/s] (for the primitives' level arcs: the fuel's equivalent)
+        self._arc_sink = -v_min * np.sin(model.aircraft.glide_angle(v_min, self._arc_rates, b.height_max))
+        self._tight_sink = -v_min * np.sin(model.aircraft.glide_angle(v_min, self._tight_rates, b.height_max))
 
     # --- Problem protocol ---------------------------------------------------------------------
     def root_state(self) -> np.ndarray:
         return self._root.copy()
 
+    def sample_targets(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        """n selection targets (north, east, height, course) [m, m, m, rad]: uniform over the domain,
+        a ``thermal_targets`` share of them over the thermals (see :class:`SoaringSSTConfig`)."""
+        q = self.space.sample(rng, n)
+        cfg = self.config
+        if cfg.thermal_targets > 0.0 and len(self._thermal_centres):
+            pick = np.flatnonzero(rng.random(n) < cfg.thermal_targets)
+            j = rng.integers(0, len(self._thermal_centres), size=len(pick))
+            r = cfg.thermal_target_radius * np.sqrt(rng.random(len(pick)))
+            phi = rng.uniform(0.0, 2.0 * math.pi, size=len(pick))
+            q[pick, 0] = self._thermal_centres[j, 0] + r * np.cos(phi)
+            q[pick, 1] = self._thermal_centres[j, 1] + r * np.sin(phi)
+        return q
+
     def sample_controls(self, rng: np.random.Generator, n: int) -> np.ndarray:
-        return self.sampler.sample(rng, n)
+        """n controls of the mixture of :class:`SoaringSSTConfig` (uniform when both shares are 0:
+        then exactly the paper's samplers and random stream)."""
+        cfg = self.config
+        if self.kind == "primitive":
+            u = self.sampler.sample(rng, n)
+            if cfg.circle_share > 0.0 and self._circling is not None:
+                pick = rng.random(n) < cfg.circle_share
+                u[pick] = self._circling.sample(rng, int(pick.sum()))
+            return u
+        if cfg.glide_share == 0.0 and cfg.circle_share == 0.0:
+            return self.sampler.sample(rng, n)
+        u = rng.uniform(-1.0, 1.0, size=(n, 3))
+        m = self.model
+        lo, hi = m.control_low, m.control_high
+        if cfg.circle_share > 0.0:
+            pick = rng.random(n) < cfg.circle_share
+            radius = rng.uniform(cfg.circle_radius[0], cfg.circle_radius[1], n)
+            sign = np.where(rng.random(n) < 0.5, -1.0, 1.0)
+            v = lo[0] + 0.5 * (u[:, 0] + 1.0) * (hi[0] - lo[0])
+            chi_dot = sign * np.minimum(v / radius, hi[1])
+            u[pick, 1] = np.clip(2.0 * (chi_dot - lo[1]) / (hi[1] - lo[1]) - 1.0, -1.0, 1.0)[pick]
+        u = u.astype(np.float32).astype(np.float64)
+        if cfg.glide_share > 0.0:
+            pick = rng.random(n) < cfg.glide_share
+            u[pick, 2] = self.glide_action(u[pick])
+        return u
+
+    def goal_controls(self, states: np.ndarray) -> np.ndarray:
+        """The steering rule of the greedy goal completions: glide home, or climb in a thermal first.
+
+        Per core state, with ``aim = goal top - radius / 10`` and the flattest zero-thrust glide
+        (best-glide airspeed, still air):
+
+        * high enough to glide to the aim height over the remaining distance: turn towards the goal
+          centre (course rate = course error / Ts, within the envelope) on the path angle that
+          arrives at the aim height -- a zero-thrust glide or steeper -- at the present airspeed
+          if its own glide suffices (no kinetic charge), else at the best-glide airspeed;
+        * too low (below the aim plus the remaining distance times the glide ratio at the circling
+          airspeed), in lift (updraft above the sink of a slow circle + 0.2 m/s): circle there at the
+          slowest airspeed and the zero-thrust glide angle, on the circle tangent to the course whose
+          centre comes closest to the thermal's centre (radius within ``circle_radius``);
+        * too low, and in lift or within one slow edge of a thermal: the slowest-airspeed arc with
+          the most lift two edges ahead (:meth:`_best_circle`) if one climbs;
+        * too low otherwise: glide towards the thermal with the shortest detour (distance to it
+          plus its distance to the goal) at the best-glide airspeed (the slowest one within one
+          such edge of it, so as not to overshoot), powered only if a glide would arrive below 50 m;
+        * no thermals: fly to the aim height (a powered climb where needed).
+
+        The primitive sampler takes the nearest single-segment primitive in normalized controls.
+        """
+        m = self.model
+        lo, hi = m.control_low, m.control_high
+        g = m.scenario.goal
+        f = m.scenario.field
+        n_, e_, chi, h = states[:, S_N], states[:, S_E], states[:, S_CHI], states[:, S_H]
+        ts = m.library.duration
+
+        def towards(tn: np.ndarray, te: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            err = np.mod(np.arctan2(te - e_, tn - n_) - chi + math.pi, 2.0 * math.pi) - math.pi
+            return np.clip(err / ts, lo[1], hi[1]), np.hypot(tn - n_, te - e_)
+
+        chi_dot, d_goal = towards(np.full_like(n_, g.north), np.full_like(e_, g.east))
+        dist = np.maximum(d_goal - 0.5 * g.radius, 1.0)
+        aim = g.height + (0.75 if self.kind == "primitive" else 0.9) * g.radius  # primitives arrive level
+        gamma = np.arctan2(aim - h, dist)
+        # glide home at the present airspeed (no kinetic charge) where its glide suffices
+        v_now = np.clip(np.where(np.isfinite(states[:, S_V]), states[:, S_V], self._glide_speed), lo[0], hi[0])
+        tan_now = np.tan(-np.interp(v_now, self._speeds, self._speed_glide))
+        v = np.where(h >= aim + dist * tan_now, v_now, self._glide_speed)
+        exact_glide = np.zeros(len(states), bool)
+        if f.thermals:
+            # climb until a glide at the circling airspeed reaches the aim: height is free in lift,
+            # and a slow glide home pays no kinetic charge
+            low = h < aim + dist * self._tan_slow
+            cen = self._thermal_centres[None, :, :] + (states[:, S_T] - self._t0)[:, None, None] * (
+                f.wind if f.drift else np.zeros(2)
+            )
+            d_th = np.hypot(cen[:, :, 0] - n_[:, None], cen[:, :, 1] - e_[:, None])
+            d_home = np.hypot(cen[:, :, 0] - g.north, cen[:, :, 1] - g.east)
+            j = np.argmin(d_th + d_home, axis=1)
+            rows = np.arange(len(states))
+            cn, ce = cen[rows, j, 0], cen[rows, j, 1]
+            cd_th, dd = towards(cn, ce)
+            lift = f.updraft(n_, e_, h, states[:, S_T]) > self._circle_sink + 0.2
+            # in lift, or the thermal within one slow edge: pick the slow arc that leads to most lift
+            reach = (hi[0] if self.kind == "primitive" else lo[0]) * ts  # primitives: any level one
+            near = low & (lift | (dd < reach))
+            circle = np.zeros(len(states), bool)
+            prim = np.full(len(states), -1, np.int64)
+            if near.any():
+                idx = np.flatnonzero(near)
+                if self.kind == "primitive":
+                    pid, gain, h_end = self._best_primitive_arc(states[near])
+                    # no net climb within reach: go on; and stop below the goal's top (the
+                    # primitives fly home level and their descents are steep)
+                    full = h_end >= g.height + 0.95 * g.radius
+                    ok = (gain > 0.0) & ~full
+                    low[idx[full]] = False  # high enough: home
+                    prim[idx[ok]] = pid[ok]
+                else:
+                    rate, gain = self._best_circle(states[near])
+                    ok = gain > 0.0
+                    chi_dot[idx[ok]] = rate[ok]
+                circle[idx[ok]] = True
+            go = low & ~circle
+            g_th = np.maximum(self._glide_angle, np.arctan2(50.0 - h, np.maximum(dd, 1.0)))
+            chi_dot = np.where(go, cd_th, chi_dot)
+            gamma = np.where(go, g_th, gamma)
+            # the last approach at the slowest airspeed, so that the edge does not overshoot the core
+            v = np.where(circle | (go & (dd < self._glide_speed * ts)), lo[0], np.where(go, self._glide_speed, v))
+            exact_glide = circle | (go & (g_th == self._glide_angle))
+        ctrl = np.stack([v, chi_dot, np.clip(gamma, lo[2], hi[2])], axis=1)
+        act = np.clip(m.control_to_action(ctrl), -1.0, 1.0)
+        if self.kind == "primitive":  # the nearest single-segment primitive in normalized controls
+            if exact_glide.any():  # circle and glide level: the primitives' glides are steep
+                act[exact_glide, 2] = m.control_to_action(np.array([lo[0], 0.0, 0.0]))[2]
+            d2 = ((act[:, None, :] - self._steer_actions[None, :, :]) ** 2).sum(axis=2)
+            pick = self._steer_ids[np.argmin(d2, axis=1)]
+            if f.thermals:
+                pick = np.where(prim >= 0, prim, pick)
+            return pick.astype(np.float64)[:, None]
+        out = act.astype(np.float32).astype(np.float64)
+        if exact_glide.any():
+            out[exact_glide, 2] = self.glide_action(out[exact_glide])
+        return out
+
+    def _arcs(self, n0, e0, chi0, rates):
+        """Still-air kinematics of constant-rate arcs at the slowest airspeed: for starts of any
+        shape S and rates (K,), 10 points along each Ts-long arc (S + (K, 10)) and the end
+        positions and courses (S + (K,))."""
+        ts = self.model.library.duration
+        v = float(self.model.control_low[0])
+        t = (np.arange(10) + 0.5) / 10.0 * ts
+        w = rates[:, None]
+        small = np.abs(w) < 1e-9
+        ws = np.where(small, 1.0, w)
+        c0 = np.asarray(chi0)[..., None, None]
+
+        def at(tt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            dn = np.where(small, v * tt * np.cos(c0), v / ws * (np.sin(c0 + ws * tt) - np.sin(c0)))
+            de = np.where(small, v * tt * np.sin(c0), -v / ws * (np.cos(c0 + ws * tt) - np.cos(c0)))
+            return np.asarray(n0)[..., None, None] + dn, np.asarray(e0)[..., None, None] + de
+
+        pn, pe = at(t)
+        en, ee = at(np.array([ts]))
+        return pn, pe, en[..., 0], ee[..., 0], c0[..., 0] + rates * ts
+
+    def _mean_lift(self, pn: np.ndarray, pe: np.ndarray, h: np.ndarray, t0: np.ndarray) -> np.ndarray:
+        """Mean updraft [m/s] over the last axis of points (the arcs' 10 points, flown from time
+        ``t0``); ``h`` and ``t0`` are per start (the leading axis)."""
+        ts = self.model.library.duration
+        t = (np.arange(10) + 0.5) / 10.0 * ts
+        extra = (1,) * (pn.ndim - 1)
+        hh = h.reshape(h.shape + extra)
+        tt = t0.reshape(t0.shape + extra[:-1] + (1,)) + t
+        return self.model.scenario.field.updraft(pn, pe, hh, tt).mean(axis=-1)
+
+    def _tight_gain(self, en, ee, ec, h: np.ndarray, t1: np.ndarray) -> np.ndarray:
+        """Best net climb [m/s] (mean updraft minus sink) of the tight circles from given ends."""
+        pn, pe, _, _, _ = self._arcs(en, ee, ec, self._tight_rates)
+        return (self._mean_lift(pn, pe, h, t1) - self._tight_sink).max(axis=-1)
+
+    def _best_circle(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Course rate [rad/s] and score [m/s] of the slowest-airspeed arc that leads to the most
+        lift, two edges ahead: for each arc rate, the mean updraft at 10 points along the arc it
+        flies in Ts (still-air kinematics at the start height) minus its zero-thrust sink, plus
+        the best net climb of the tight circles flown from the arc's end (:meth:`_tight_gain`) --
+        so that an arc that moves towards the core wins over a circle that stays off it."""
+        ts = self.model.library.duration
+        h, t0 = states[:, S_H], states[:, S_T]
+        pn, pe, en, ee, ec = self._arcs(states[:, S_N], states[:, S_E], states[:, S_CHI], self._arc_rates)
+        first = self._mean_lift(pn, pe, h, t0) - self._arc_sink
+        score = first + self._tight_gain(en, ee, ec, h, t0 + ts)
+        k = np.argmax(score, axis=1)
+        return self._arc_rates[k], score[np.arange(len(states)), k]
+
+    def _best_primitive_arc(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The primitive sampler's :meth:`_best_circle`: every level primitive (within the bank
+        limit) is flown through the model (its exact cost, in m/s of climb: -cost / (g Ts)), plus the
+        tight circles' net climb from its end; returns the best primitive, its score and its end
+        height [m]."""
+        ts = self.model.library.duration
+        ids = self._near_ids
+        n, k = len(states), len(ids)
+        e = self.propagate(np.repeat(states, k, axis=0), np.tile(ids, n).astype(np.float64)[:, None])
+        end = e.states.reshape(n, k, -1)
+        gain = -e.cost.reshape(n, k) / (G * ts)
+        gain = np.where(e.outcome.reshape(n, k) == EDGE_INVALID, -np.inf, gain)
+        score = gain + self._tight_gain(
+            end[..., S_N], end[..., S_E], end[..., S_CHI], states[:, S_H], states[:, S_T] + ts
+        )
+        j = np.argmax(score, axis=1)
+        return ids[j], score[np.arange(n), j], end[np.arange(n), j, S_H]
+
+    def glide_action(self, actions: np.ndarray) -> np.ndarray:
+        """The float32-exact normalized path-angle component of the zero-thrust glide for each
+        action's (airspeed, course rate): the largest float32 whose path angle needs no thrust."""
+        m = self.model
+        lo, hi = m.control_low, m.control_high
+        c = m.action_to_control(actions)
+        gam = m.aircraft.glide_angle(c[:, 0], c[:, 1], self.model.scenario.bounds.height_max)
+        a = np.clip(2.0 * (gam - lo[2]) / (hi[2] - lo[2]) - 1.0, -1.0, 1.0).astype(np.float32)
+        back = lo[2] + 0.5 * (a.astype(np.float64) + 1.0) * (hi[2] - lo[2])  # as action_to_control maps it
+        a = np.where((back > gam) & (a > -1.0), np.nextafter(a, np.float32(-1.0)), a)
+        return a.astype(np.float64)
 
     def propagate(self, states: np.ndarray, controls: np.ndarray) -> Edges:
         x = states[:, :4]
@@ -176,7 +508,9 @@ class SoaringProblem:
         out[:, S_T] = t0 + dur
         out[:, S_V] = v
         outcome = np.where(code == FLYING, EDGE_VALID, np.where(code == GOAL, EDGE_GOAL, EDGE_INVALID))
-        return Edges(states=out, cost=r.cost, duration=dur, outcome=outcome)
+        # no plan ends above h_cap, and fuel + kinetic >= 0: from height h at least -g (h_cap - h) to go
+        togo = -G * (self._h_cap - out[:, S_H]) if self.config.cost_bound else None
+        return Edges(states=out, cost=r.cost, duration=dur, outcome=outcome, togo=togo)
 
     # --- env actions ----------------------------------------------------------------------------
     def to_action(self, control: np.ndarray) -> int | np.ndarray:
