@@ -166,6 +166,7 @@ def summarize(runs: list[dict[str, Any]], time_limit: float, refs: dict[str, Any
                 "sampler": sampler,
                 "runs": len(rs),
                 "cost": {f"{t:g}": _median(cost[t]) for t in ts},
+                "cost_p10_p90": [float(x) for x in np.percentile(np.asarray(cost[time_limit]), [10, 90])],
                 "regret": {f"{t:g}": _median(reg[t]) for t in ts},
                 "share_regret_le_1": float(np.mean(final <= 1.0)) if final.size else math.nan,
                 "regret_defined": int(final.size),
@@ -186,12 +187,15 @@ def table(summary: list[dict[str, Any]], time_limit: float) -> str:
     """Markdown table of :func:`summarize`."""
     ts = [f"{t:g}" for t in (*CHECKPOINTS, time_limit)]
     head = ["configuration", "sampler", "runs", *[f"regret @{t} s" for t in ts], f"cost @{ts[-1]} s [J/kg]"]
+    head += ["10–90 % of it"]
     head += [f"time to regret <= {NEAR_BEST:g}", "regret <= 1 (runs with a regret)", "CPU share"]
     lines = ["| " + " | ".join(head) + " |", "|---|---|" + "---:|" * (len(head) - 2)]
     for s in summary:
         cells = [s["row"], s["sampler"], str(s["runs"])]
         cells += [_f(s["regret"][t], "{:.2f}") for t in ts]
-        cells += [_f(s["cost"][ts[-1]], "{:,.0f}"), _f(s["time_to_near_best"], "{:.2f} s", "never")]
+        lo, hi = s["cost_p10_p90"]
+        cells += [_f(s["cost"][ts[-1]], "{:,.0f}"), f"{_f(lo, '{:,.0f}')} … {_f(hi, '{:,.0f}')}"]
+        cells += [_f(s["time_to_near_best"], "{:.2f} s", "never")]
         cells += [f"{100 * s['share_regret_le_1']:.0f} % of {s['regret_defined']}", f"{100 * s['cpu_share']:.0f} %"]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
