@@ -4,8 +4,8 @@
 Examples::
 
     # the README's table: all agents (PPO where trained), paper + 20 held-out scenarios, 3 seeds
-    python scripts/evaluate.py --heldout 20 --seeds 0 1 2 --sst-budget 20
-    # a quick look
+    python scripts/evaluate.py --heldout 20 --seeds 0 1 2 --sst-budget 20 --out results/eval
+    # a quick look (into results/eval-local, never the committed results)
     python scripts/evaluate.py --agents heuristic random --heldout 5
     # deterministic SST (iteration budget instead of wall clock)
     python scripts/evaluate.py --agents sst-primitives --sst-budget none --sst-iterations 2000
@@ -56,7 +56,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--ppo-root", default="results/ppo", help="where <algo>/model.zip runs live (default results/ppo)")
     p.add_argument("--ppo-dir", action="append", default=[], metavar="AGENT=DIR", help="e.g. ppo-masked=runs/x")
     p.add_argument("--ppo-model", choices=["best", "final"], default="best", help="which saved PPO model to use")
-    p.add_argument("--out", default="results/eval", help="output directory (default results/eval)")
+    p.add_argument(
+        "--out",
+        default="results/eval-local",
+        help="output directory (default results/eval-local, not tracked; the README's committed results "
+        "live in results/eval: pass --out results/eval to add to them)",
+    )
     p.add_argument("--fresh", action="store_true", help="ignore existing results in --out (default: resume)")
     p.add_argument("--quiet", action="store_true", help="no per-episode lines, no progress bar")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (per-episode lines stay)")
