@@ -1,6 +1,8 @@
 """Ablation of the soaring SST configuration, and its targets on the paper and held-out scenarios.
 
-Rows: the paper's planner (``SST_CONFIGS["paper"]``: uniform samplers, no bound), the soaring
+Rows: the paper's planner (``SST_CONFIGS["paper"]``: uniform samplers, no bound), the paper's
+planner with the glide mixture (the first step of the cumulative path paper -> + glide mixture ->
++ cost bound = "soaring without goal completions" -> + completions = soaring), the soaring
 configuration (``SST_CONFIGS["soaring"]``, the default) and the soaring configuration with each of
 its measures switched back to the paper's setting (leave one out: a measure earns its place when
 its row is worse than the soaring row). Every run plans from the scenario's start for ``--time``
@@ -57,7 +59,11 @@ NEAR_BEST = 0.1
 def rows() -> dict[str, SoaringSSTConfig]:
     """The ablation rows: label -> planner configuration."""
     soar = SST_CONFIGS["soaring"]
-    out = {"paper": SST_CONFIGS["paper"], "soaring": soar}
+    paper = SST_CONFIGS["paper"]
+    # the cumulative path paper -> + glide mixture -> + cost bound (= soaring without completions)
+    # -> + completions (= soaring), and leave-one-out rows
+    out = {"paper": paper, "paper + glide mixture": dataclasses.replace(paper, glide_share=soar.glide_share)}
+    out["soaring"] = soar
     for name, off in MEASURES.items():
         out[f"soaring without {name}"] = dataclasses.replace(soar, **off)
     return out
@@ -281,8 +287,8 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"{exc}; run scripts/reference.py first (or pass --reference-dir)")
     for sampler in args.samplers:
         for row, name, seed in plan:
-            if sampler == "primitive" and row == "soaring without glide mixture":
-                continue  # the glide mixture acts on the continuous sampler only: the soaring row itself
+            if sampler == "primitive" and row in ("soaring without glide mixture", "paper + glide mixture"):
+                continue  # the glide mixture acts on the continuous sampler only: rows equal to others
             cfg = dataclasses.asdict(cfgs[row])
             jobs.append(
                 {"row": row, "scenario": name, "sampler": sampler, "seed": seed, "time": args.time, "config": cfg}
