@@ -492,7 +492,7 @@ class SST:
         base_elapsed = self.stats.elapsed
         done = 0
         imp_k = np.zeros(kk, np.int64)
-        a, w = self._a, self._w
+        a = self._a  # (the dict is grown in place)
         if self.stats.iterations == 0 and self.params.completions:
             self._accepted[:] = -1
             self._accepted[0] = 0  # the first completion starts at the root
@@ -505,10 +505,7 @@ class SST:
             n = kk if n_lim is None else min(kk, n_lim - done)
             if n <= 0:
                 break
-            if self._cnt[K.C_USED] + n + 1 > len(a["cost"]):
-                self._alloc_nodes(2 * len(a["cost"]) + n)
-            if self._cnt[K.C_WIT] + n + 1 > len(w["rep"]):
-                self._alloc_witnesses(2 * len(w["rep"]) + n)
+            self._grow(n)
             q = self._targets(n)
             sel = np.empty(n, np.int64)
             g0, cs, gn = self._a_grid

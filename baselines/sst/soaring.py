@@ -232,9 +232,9 @@ class SoaringProblem:
         # primitives fly home level: their glides are steep)
         self._tan_slow = 0.0 if sampler == "primitive" else math.tan(-float(glide[0]))
         v_min = float(model.control_low[0])
-        self._circle_rate = min(v_min / cfg.circle_radius[0], float(model.control_high[1]))
-        self._circle_gamma = float(model.aircraft.glide_angle(v_min, self._circle_rate, b.height_max))
-        self._circle_sink = -v_min * math.sin(self._circle_gamma)  # [m/s]
+        rate = min(v_min / cfg.circle_radius[0], float(model.control_high[1]))
+        # sink of the tightest circle at zero thrust [m/s]: the completions' "in lift" threshold
+        self._circle_sink = -v_min * math.sin(float(model.aircraft.glide_angle(v_min, rate, b.height_max)))
         # the arcs the completions circle on: 41 course rates over the envelope, or the rates of
         # the slowest level single-segment primitives; "tight": +-3/4 and +-1 of the largest rate
         # (primitives: the two largest of each sign)
