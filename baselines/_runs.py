@@ -1,13 +1,14 @@
 """Run-directory hygiene for the experiment and the evaluation: one writer per output folder, results
-files whose errors name the file, and worker processes that never outlive their parent.
+files whose errors name the file, and the scripts' common command-line checks (the worker
+processes, which never outlive their parent, are :mod:`baselines.backends`'s).
 
 * :func:`holds_dir_lock` -- a decorator: the function holds an exclusive ``fcntl.flock`` on
   ``<out>/.lock`` (the file holds the PID) while it runs; a second run into the same folder refuses
   to start with a :class:`ConfigError` naming the folder and the PID. The kernel drops the lock
   when its holder dies, even by SIGKILL, so a stale lock file never blocks a later run.
 * :func:`read_json` -- ``json.loads`` of a file, with a :class:`ConfigError` naming the file.
-* :func:`watch_parent` -- a ``ProcessPoolExecutor`` initializer: the worker exits as soon as its
-  parent is gone (SIGTERM or SIGKILL of the main process leaves no worker behind).
+* :func:`check_cli_args` -- the scripts' common command-line checks; :func:`add_backend_args` --
+  their ``--backend``, ``--address`` and ``--workers`` options (:mod:`baselines.backends`).
 """
 
 from __future__ import annotations
@@ -16,12 +17,11 @@ import functools
 import inspect
 import json
 import os
-import threading
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
 
+from baselines.backends import BACKENDS, check_backend
 from soaring_env._validation import ConfigError
 
 try:
@@ -31,8 +31,6 @@ except ImportError:  # pragma: no cover - not POSIX: no locking
 
 F = TypeVar("F", bound=Callable[..., Any])
 LOCK_FILE = ".lock"
-#: How often a worker checks that its parent is still alive [s].
-PARENT_POLL_S = 0.5
 
 
 class DirLock:
@@ -103,18 +101,6 @@ def read_json(path: str | os.PathLike[str], what: str = "results file") -> Any:
         ) from None
 
 
-def watch_parent(parent_pid: int) -> None:
-    """Pool-worker initializer: a daemon thread ends the worker once ``parent_pid`` is no longer its
-    parent (the parent died; the worker was re-parented). Polls every ``PARENT_POLL_S`` seconds."""
-
-    def poll() -> None:
-        while os.getppid() == parent_pid:
-            time.sleep(PARENT_POLL_S)
-        os._exit(1)  # no cleanup: the parent that would collect the result is gone
-
-    threading.Thread(target=poll, name="watch-parent", daemon=True).start()
-
-
 def check_cli_args(
     parser: Any,
     args: Any,
@@ -126,7 +112,11 @@ def check_cli_args(
 ) -> None:
     """The common command-line checks, answered with ``parser.error`` (usage, ``error:`` line, exit 2):
     ``counts`` >= 1 (``heldout`` may be 0), ``seeds`` >= 0 (an int or a list of ints), ``positive``
-    > 0 and finite, ``dirs`` not pointing at an existing file. ``None`` values are not checked."""
+    > 0 and finite, ``dirs`` not pointing at an existing file. ``None`` values are not checked.
+    Where ``args`` has a ``backend`` (:func:`add_backend_args`), the backend, ``--address`` and
+    ``--workers`` are checked too (:func:`baselines.backends.check_backend`)."""
+    if hasattr(args, "backend") and "workers" not in counts:
+        counts = (*counts, "workers")
     for name in counts:
         v = getattr(args, name)
         low = 0 if name == "heldout" else 1
@@ -145,6 +135,42 @@ def check_cli_args(
         v = getattr(args, name)
         if v is not None and Path(v).exists() and not Path(v).is_dir():
             parser.error(f"--{name.replace('_', '-')}={str(v)!r} is a file; an output directory is required")
+    if hasattr(args, "backend"):
+        try:
+            check_backend(args.backend, args.workers, args.address)
+        except ConfigError as exc:
+            parser.error(str(exc))
+
+
+def cli_workers(args: Any, local_default: int) -> int | None:
+    """``--workers`` as given; unset: ``local_default`` with ``--backend local``, None (every CPU of
+    the cluster) with ``--backend ray``."""
+    if args.workers is not None:
+        return int(args.workers)
+    return local_default if args.backend == "local" else None
+
+
+def add_backend_args(parser: Any, workers_default: str) -> None:
+    """Add ``--backend {local,ray}``, ``--address`` and ``--workers`` (default None: the script's
+    local default, described by ``workers_default``, or every CPU of the Ray cluster)."""
+    parser.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default="local",
+        help="where the jobs run: local worker processes (default) or a Ray cluster (pip install -e '.[ray]')",
+    )
+    parser.add_argument(
+        "--address",
+        default=None,
+        help="with --backend ray: a running cluster ('auto' or HEAD:6379 on a node of it; ray://HEAD:10001 "
+        "from elsewhere, with pip install 'ray[client]'); default: a local Ray instance for this run",
+    )
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help=f"jobs at a time (default: {workers_default} locally; every CPU of the cluster with --backend ray)",
+    )
 
 
 def progress_bar(total: int, initial: int, enabled: bool, desc: str, unit: str) -> Any:

@@ -11,7 +11,7 @@ flight time [s] (``env.unwrapped.time``), number of decisions, return, and compu
 agent's ``reset`` (where a planner plans) plus all its ``predict`` calls, in total and per
 decision. The flown path (every output point of every edge) is kept for plots.
 
-Scenario names: the named scenarios of :mod:`soaring_env.scenario` (``"paper"``) and
+Scenario names: those of :func:`soaring_env.scenario.get_scenario` -- ``"paper"``, a ``.json`` path,
 ``"random-<seed>"`` -- ``make_scenario(np.random.default_rng(seed))``; the held-out set is
 ``random-10000``, ``random-10001``, ... (:func:`heldout_names`), disjoint from the validation
 seeds used during training (5000+) and from the training scenarios (drawn from each env's own
@@ -19,7 +19,9 @@ seeds used during training (5000+) and from the training scenarios (drawn from e
 
 Results are written atomically (:func:`soaring_env.scenario.atomic_write_text`) after every
 episode; a rerun with the same output directory resumes, reusing the episodes whose agent
-settings (budget, model file) are unchanged.
+settings (budget, model file) are unchanged. The episodes can run in parallel (``workers``, and
+``backend="ray"`` for a Ray cluster: :mod:`baselines.backends`); the file is the same, but for the
+timings, as the serial one.
 """
 
 from __future__ import annotations
@@ -28,24 +30,26 @@ import hashlib
 import json
 import math
 import platform
-import re
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
-from baselines._runs import holds_dir_lock, read_json
+from baselines._runs import holds_dir_lock, progress_bar, read_json
+from baselines.backends import check_backend, run_jobs
 from baselines.reference.yardstick import ScenarioReference
 from soaring_env._validation import ConfigError
-from soaring_env.scenario import SCENARIOS, Scenario, atomic_write_text, get_scenario, make_scenario
+from soaring_env.scenario import HELDOUT_SEED0 as HELDOUT_SEED0
+from soaring_env.scenario import Scenario, atomic_write_text, check_scenario_name
+from soaring_env.scenario import get_scenario as resolve_scenario
+from soaring_env.scenario import heldout_names as heldout_names
 
 DISCRETE_ID = "soaring/Soaring-v0"
 CONTINUOUS_ID = "soaring/SoaringContinuous-v0"
-HELDOUT_SEED0 = 10_000
 RESULTS_FILE = "results.json"
 TABLE_FILE = "results.md"
 SCHEMA = 1
@@ -66,7 +70,6 @@ AGENT_NAMES = (
 )
 #: PPO agent name -> training algorithm (see :data:`baselines.ppo.ALGOS`).
 PPO_AGENTS = {"ppo-discrete": "discrete", "ppo-masked": "masked", "ppo-continuous": "continuous"}
-_RANDOM_RE = re.compile(r"^random-(\d+)$")
 
 
 @dataclass(frozen=True)
@@ -126,28 +129,8 @@ def check_agent_name(name: str) -> str:
     return name
 
 
-def check_scenario_name(name: str) -> str:
-    """``name`` if it names a scenario, else a :class:`ConfigError` listing the known ones."""
-    if name in SCENARIOS or _RANDOM_RE.match(name):
-        return name
-    known = [*sorted(SCENARIOS), "random-<seed> (held-out: random-10000, random-10001, ...)"]
-    raise ConfigError(f"scenario {name!r} is unknown; known: {', '.join(known)}")
-
-
-def heldout_names(n: int, start: int = HELDOUT_SEED0) -> list[str]:
-    """Names of the first ``n`` held-out random scenarios."""
-    return [f"random-{start + k}" for k in range(n)]
-
-
-def resolve_scenario(name: str, random_scenario: Mapping[str, Any] | None = None) -> Scenario:
-    """The scenario called ``name`` (``"random-<seed>"`` uses ``make_scenario`` with that seed and
-    the env's ``random_scenario`` keywords, so held-out scenarios follow the training distribution)."""
-    check_scenario_name(name)
-    m = _RANDOM_RE.match(name)
-    if m:
-        sc = make_scenario(np.random.default_rng(int(m.group(1))), **dict(random_scenario or {}))
-        return sc.replace(name=name)
-    return get_scenario(name)
+# The scenario names (check_scenario_name, resolve_scenario = soaring_env.scenario.get_scenario,
+# heldout_names, HELDOUT_SEED0) live in soaring_env.scenario, the one namespace of scenario names.
 
 
 # --- agents -----------------------------------------------------------------------------------------
@@ -191,8 +174,13 @@ def agent_spec(name: str, config: EvalConfig) -> AgentSpec:
             "time_budget": config.sst_time_budget,
             "iterations": config.sst_iterations,
         }
-        if planner != "paper":  # (the paper planner's records predate this key)
+        if planner != "paper":  # (the paper planner's records predate these keys)
+            from baselines.sst.soaring import SST_CONFIGS, STEERING_VERSION
+
+            # a change of the configuration or of the steering rule redoes these episodes on resume
             settings["planner"] = planner
+            settings["config"] = asdict(SST_CONFIGS[planner])
+            settings["steering"] = STEERING_VERSION
 
         def make_sst() -> Any:
             from baselines.agents import SSTPlannerAgent
@@ -331,16 +319,28 @@ def run_evaluation(
     progress: bool = False,
     log: Callable[[str], None] | None = None,
     references: Mapping[str, ScenarioReference] | None = None,
+    workers: int | None = 1,
+    backend: str = "local",
+    address: str | None = None,
 ) -> dict[str, Any]:
     """Run every (agent, scenario, seed) of ``config``; write ``results.json`` after each episode.
+
+    Each episode is one job of :func:`baselines.backends.run_jobs`; the results file holds the
+    episodes in the order of ``config`` (agents, then scenarios, then seeds) whichever job finished
+    first, so that it is the same -- but for the timings and ``meta.created`` -- for any ``workers``
+    and ``backend``. Agents with an SST wall-clock budget depend on the machine's load anyway.
 
     :param resume: reuse episodes already in ``out_dir/results.json`` whose agent settings match.
     :param references: the reference per scenario name (:func:`baselines.reference.load_references`);
         every episode record gets its ``regret`` against it (None where it has none).
     :param progress: show a tqdm progress bar.
     :param log: called with one line per episode (e.g. ``print``; through tqdm while ``progress``).
+    :param workers: episodes at a time (1: one after another in this process; None: one per CPU).
+    :param backend: ``"local"`` (worker processes) or ``"ray"``; see :mod:`baselines.backends`.
+    :param address: with ``backend="ray"``: a running cluster's address (None: a local Ray instance).
     :returns: the results dict (also on disk).
     """
+    check_backend(backend, workers, address)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     res_path = out / RESULTS_FILE
@@ -376,69 +376,100 @@ def run_evaluation(
             "ppo_model": config.ppo_model,
         },
     }
-    episodes: list[dict[str, Any]] = []
-    keys_wanted = [(a, s, seed) for a in config.agents for s in config.scenarios for seed in config.seeds]
+    others: list[dict[str, Any]] = []
+    keys_wanted = [_key(a, s, seed) for a in config.agents for s in config.scenarios for seed in config.seeds]
     # Keep finished episodes of other agents/scenarios too (a results file can grow run by run).
     if old is not None:
-        wanted = {_key(*k) for k in keys_wanted}
+        wanted = set(keys_wanted)
         for ep in old["episodes"]:
             k = _key(ep["agent"], ep["scenario"], ep["seed"])
             a = ep["agent"]
             same = a not in specs or old["meta"]["agents"].get(a) == _jsonable(specs[a].settings)
             if k not in wanted and same:
-                episodes.append(ep)
+                others.append(ep)
                 meta["agents"].setdefault(ep["agent"], old["meta"]["agents"].get(ep["agent"]))
                 meta["agent_envs"].setdefault(ep["agent"], old["meta"].get("agent_envs", {}).get(ep["agent"]))
                 meta["scenarios"].setdefault(ep["scenario"], old["meta"]["scenarios"].get(ep["scenario"]))
-
+    finished = {k: done[k] for k in keys_wanted if k in done}  # key -> episode, reused or run now
+    jobs = [
+        EpisodeJob(a, s, scenarios[s], seed, config, _cache_key(specs[a], config))
+        for a in config.agents
+        for s in config.scenarios
+        for seed in config.seeds
+        if _key(a, s, seed) not in finished
+    ]
     refs = references or {}
 
+    def results() -> dict[str, Any]:
+        episodes = others + [finished[k] for k in keys_wanted if k in finished]  # the serial order
+        return attach_regret({"schema": SCHEMA, "meta": meta, "episodes": episodes}, refs)
+
     def save() -> None:
-        data = attach_regret({"schema": SCHEMA, "meta": meta, "episodes": episodes}, refs)
-        atomic_write_text(res_path, json.dumps(data, separators=(",", ":")))
+        atomic_write_text(res_path, json.dumps(results(), separators=(",", ":")))
 
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=len(keys_wanted), desc="episodes", unit="ep")
-    envs: dict[str, gym.Env] = {}
+    bar = progress_bar(len(keys_wanted), len(finished), progress, "episodes", "ep")
     try:
-        for agent_name in config.agents:
-            spec = specs[agent_name]
-            agent = None
-            for sc_name in config.scenarios:
-                for seed in config.seeds:
-                    k = _key(agent_name, sc_name, seed)
-                    if k in done:
-                        episodes.append(done[k])
-                        if bar is not None:
-                            bar.update(1)
-                        continue
-                    if agent is None:
-                        agent = spec.factory()
-                    if spec.env_id not in envs:
-                        envs[spec.env_id] = make_env(spec.env_id, config.env_kwargs)
-                    rec = run_episode(envs[spec.env_id], agent, scenarios[sc_name], seed, config.keep_paths)
-                    rec = {"agent": agent_name, "scenario": sc_name, "seed": seed, "env_id": spec.env_id, **rec}
-                    episodes.append(rec)
-                    save()
-                    if log is not None:
-                        (bar.write if bar is not None else log)(
-                            f"{agent_name:>16s} {sc_name:>12s} seed {seed}: "
-                            f"{'goal' if rec['success'] else rec['outcome']:>13s} "
-                            f"E={rec['energy_spent'] / 1000:7.2f} kJ/kg t={rec['flight_time']:5.0f} s "
-                            f"compute={rec['compute_total_s']:.2f} s"
-                        )
-                    if bar is not None:
-                        bar.update(1)
+        for i, rec in run_jobs(run_episode_job, jobs, workers=workers, backend=backend, address=address):
+            job = jobs[i]
+            finished[_key(job.agent, job.scenario, job.seed)] = rec
+            save()
+            if log is not None:
+                (bar.write if bar is not None else log)(
+                    f"{job.agent:>16s} {job.scenario:>12s} seed {job.seed}: "
+                    f"{'goal' if rec['success'] else rec['outcome']:>13s} "
+                    f"E={rec['energy_spent'] / 1000:7.2f} kJ/kg t={rec['flight_time']:5.0f} s "
+                    f"compute={rec['compute_total_s']:.2f} s"
+                )
+            if bar is not None:
+                bar.update(1)
     finally:
-        for env in envs.values():
-            env.close()
+        _close_cached()  # the agents and envs of episodes run in this process
         if bar is not None:
             bar.close()
     save()
-    return attach_regret({"schema": SCHEMA, "meta": meta, "episodes": episodes}, refs)
+    return results()
+
+
+@dataclass(frozen=True)
+class EpisodeJob:
+    """One episode to run (a job of :func:`run_episode_job`): ``agent`` on ``scenario`` (its name and
+    the scenario itself) with ``seed``; ``cache_key`` names the agent's settings and env."""
+
+    agent: str
+    scenario: str
+    scenario_obj: Scenario
+    seed: int
+    config: EvalConfig
+    cache_key: str
+
+
+#: Per process: the agents (and their envs) built for earlier episodes, by :attr:`EpisodeJob.cache_key`.
+_CACHE: dict[str, tuple[Any, gym.Env, str]] = {}
+
+
+def _cache_key(spec: AgentSpec, config: EvalConfig) -> str:
+    return json.dumps([spec.name, spec.env_id, _jsonable(spec.settings), _jsonable(config.env_kwargs)])
+
+
+def run_episode_job(job: EpisodeJob) -> dict[str, Any]:
+    """Run one episode (in this process, a worker process or a Ray task) and return its record.
+
+    The agent and its env are built once per process and reused for the process's later episodes,
+    as in a serial run: every episode starts from ``env.reset(seed=...)`` and ``agent.reset(env,
+    seed)``, so the record depends only on the job."""
+    if job.cache_key not in _CACHE:
+        spec = agent_spec(job.agent, job.config)
+        _CACHE[job.cache_key] = (spec.factory(), make_env(spec.env_id, job.config.env_kwargs), spec.env_id)
+    agent, env, env_id = _CACHE[job.cache_key]
+    rec = run_episode(env, agent, job.scenario_obj, job.seed, job.config.keep_paths)
+    return {"agent": job.agent, "scenario": job.scenario, "seed": job.seed, "env_id": env_id, **rec}
+
+
+def _close_cached() -> None:
+    """Close and forget the envs of :data:`_CACHE` (of this process)."""
+    for _, env, _ in _CACHE.values():
+        env.close()
+    _CACHE.clear()
 
 
 def _jsonable(x: Any) -> Any:

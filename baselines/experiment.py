@@ -2,11 +2,16 @@
 the paper scenario; the table of failures, iterations, active nodes, solution cost and flight time
 beside the paper's numbers; and the paper's figures 2-5.
 
-Runs execute in parallel worker processes (``spawn``; one planner run per core at a time, so that
-the wall-clock budget means the same thing as in a serial run). Each finished run is written at
-once, atomically, to ``<out>/runs/<planner>-<run>.json``; an interrupted experiment resumes and
-skips the runs whose file exists with the same settings. The table and the figures are made from
-the result files only.
+Runs execute in parallel jobs (:func:`baselines.backends.run_jobs`: local worker processes or a
+Ray cluster; one planner run per core at a time, so that the wall-clock budget means the same thing
+as in a serial run). Each finished run is written at once, atomically, to
+``<out>/runs/<planner>-<run>.json``; an interrupted experiment resumes and skips the runs whose file
+exists with the same settings. The table and the figures are made from the result files only.
+
+Every run records the CPU share it got: process CPU time / wall time of its planning. The budget
+is wall clock, so a run that shares its core does fewer iterations than on a quiet machine; when
+the median share is below :data:`BUSY_CPU_SHARE` the report says that the machine was busy and
+that its time-budgeted numbers are not comparable (the paper's and other machines' alike).
 """
 
 from __future__ import annotations
@@ -14,18 +19,17 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import multiprocessing as mp
 import os
 import time
 from collections.abc import Iterable
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from baselines._runs import holds_dir_lock, progress_bar, watch_parent
+from baselines._runs import holds_dir_lock, progress_bar
+from baselines.backends import check_backend, run_jobs
 from baselines.reference.yardstick import ScenarioReference
 from baselines.sst.core import SSTError
 from baselines.sst.soaring import SAMPLERS, SST_CONFIGS, SoaringSSTConfig
@@ -45,6 +49,9 @@ PAPER_CLAIMS = {
     "active_nodes": "the same number of active nodes for both",
     "flight_time": "primitive paths took about half the flight time of continuous ones (figure 5)",
 }
+#: Median CPU share (process CPU time / wall time of the planning) below which the machine counts as
+#: busy: the runs shared their cores, and their time-budgeted results are not comparable.
+BUSY_CPU_SHARE = 0.9
 
 
 @dataclass(frozen=True)
@@ -53,30 +60,38 @@ class ExperimentConfig:
 
     :param runs: runs per planner (R; paper: 30).
     :param time_limit: wall-clock planning budget per run [s] (T; paper: 20 s).
-    :param workers: parallel worker processes (default: the number of CPU cores).
+    :param workers: runs at a time (default: the number of CPU cores; None: every CPU of the
+        backend -- with ``backend="ray"`` the whole cluster).
     :param seed: seed of run 0; run r uses ``seed + r`` (for both planners).
     :param out_dir: where the per-run result files, the table and the figures go.
     :param scenario: the scenario (default: the paper scenario).
     :param planner: planner settings (default: the paper's planner, ``SST_CONFIGS["paper"]``).
     :param planners: which planners to run.
+    :param backend: ``"local"`` (worker processes) or ``"ray"`` (see :mod:`baselines.backends`).
+    :param address: with ``backend="ray"``: a running cluster's address (None: a local Ray instance).
     """
 
     runs: int = 30
     time_limit: float = 20.0
-    workers: int = field(default_factory=lambda: os.cpu_count() or 1)
+    workers: int | None = field(default_factory=lambda: os.cpu_count() or 1)
     seed: int = 0
     out_dir: Path = Path("results/paper")
     scenario: Scenario = field(default_factory=lambda: get_scenario("paper"))
     planner: SoaringSSTConfig = field(default_factory=lambda: SST_CONFIGS["paper"])
     planners: tuple[str, ...] = PLANNERS
+    backend: str = "local"
+    address: str | None = None
 
     def __post_init__(self) -> None:
         if isinstance(self.runs, bool) or not isinstance(self.runs, int) or self.runs < 1:
             raise SSTError(f"runs={self.runs!r} must be an integer >= 1")
         if not (isinstance(self.time_limit, (int, float)) and math.isfinite(self.time_limit) and self.time_limit > 0):
             raise SSTError(f"time_limit={self.time_limit!r} must be a finite number of seconds > 0")
-        if isinstance(self.workers, bool) or not isinstance(self.workers, int) or self.workers < 1:
+        if self.workers is not None and (
+            isinstance(self.workers, bool) or not isinstance(self.workers, int) or self.workers < 1
+        ):
             raise SSTError(f"workers={self.workers!r} must be an integer >= 1")
+        check_backend(self.backend, self.workers, self.address)
         for p in self.planners:
             if p not in PLANNERS:
                 raise SSTError(f"planner {p!r} is unknown; allowed: {', '.join(PLANNERS)}")
@@ -117,9 +132,9 @@ def run_one(job: dict[str, Any]) -> dict[str, Any]:
     if planner not in _WARM:  # compile / load the numba kernels outside the timed run
         plan_soaring(model, planner, max_iterations=2 * cfg.batch_size, seed=0, config=cfg)
         _WARM.add(planner)
-    t0 = time.process_time()
+    t0, w0 = time.process_time(), time.perf_counter()
     res = plan_soaring(model, planner, time_limit=job["time_limit"], seed=job["seed"], config=cfg)
-    cpu = time.process_time() - t0
+    cpu, wall = time.process_time() - t0, time.perf_counter() - w0
     st = res.stats
     plan = res.plan
     return {
@@ -135,6 +150,7 @@ def run_one(job: dict[str, Any]) -> dict[str, Any]:
         "iterations": st.iterations,
         "elapsed": st.elapsed,
         "cpu_time": cpu,
+        "wall_time": wall,
         "active": st.active,
         "inactive": st.inactive,
         "total": st.total,
@@ -191,29 +207,37 @@ def run_experiment(cfg: ExperimentConfig, *, progress: bool = True, fresh: bool 
     ]
     (cfg.out_dir / "runs").mkdir(parents=True, exist_ok=True)
     if jobs:
-        # one single-threaded planner per core: keep BLAS/OpenMP pools out of the way
-        for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
-            os.environ.setdefault(var, "1")
         bar = progress_bar(len(jobs) + len(done), len(done), progress, "SST runs", "run")
-        ctx = mp.get_context("spawn")
-        workers = min(cfg.workers, len(jobs))
-        # workers exit when this process dies (SIGTERM, SIGKILL): watch_parent polls their parent PID
-        with ProcessPoolExecutor(workers, ctx, initializer=watch_parent, initargs=(os.getpid(),)) as pool:
-            pending = {pool.submit(run_one, job) for job in jobs}
-            while pending:
-                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for fut in finished:
-                    rec = fut.result()
-                    atomic_write_text(cfg.run_path(rec["planner"], rec["run"]), json.dumps(rec))
-                    done[(rec["planner"], rec["run"])] = rec
-                    if bar is not None:
-                        bar.update(1)
+        for _, rec in run_jobs(run_one, jobs, workers=cfg.workers, backend=cfg.backend, address=cfg.address):
+            atomic_write_text(cfg.run_path(rec["planner"], rec["run"]), json.dumps(rec))
+            done[(rec["planner"], rec["run"])] = rec
+            if bar is not None:
+                bar.update(1)
         if bar is not None:
             bar.close()
     return [done[k] for k in sorted(done, key=lambda k: (cfg.planners.index(k[0]), k[1]))]
 
 
 # --- summary and table ------------------------------------------------------------------------
+def cpu_share(rec: dict[str, Any]) -> float:
+    """Process CPU time / wall time of a run's planning (1: it had a core to itself; NaN: no time).
+    Records written before ``wall_time`` was kept use the planner's own clock (``elapsed``)."""
+    wall = rec.get("wall_time", rec.get("elapsed", 0.0))
+    return rec["cpu_time"] / wall if wall > 0 else math.nan
+
+
+def busy_warning(records: list[dict[str, Any]]) -> str | None:
+    """A warning if the median CPU share of ``records`` is below :data:`BUSY_CPU_SHARE`, else None."""
+    shares = [x for x in map(cpu_share, records) if not math.isnan(x)]
+    if not shares or float(np.median(shares)) >= BUSY_CPU_SHARE:
+        return None
+    return (
+        f"warning: machine was busy: the median CPU share of the planning was {float(np.median(shares)):.2f} "
+        f"(< {BUSY_CPU_SHARE:g}; min {min(shares):.2f}): time-budgeted results are not comparable; "
+        "rerun on a quiet machine, one worker per free core"
+    )
+
+
 def _mean_std(xs: Iterable[float]) -> tuple[float, float]:
     a = np.asarray([x for x in xs if x is not None], dtype=np.float64)
     if a.size == 0:
@@ -235,6 +259,9 @@ def summarize(
         for name in ("iterations", "active", "total", "witnesses"):
             s[name] = _mean_std(r[name] for r in recs)
         s["iterations_per_cpu_s"] = _mean_std(r["iterations"] / r["cpu_time"] for r in recs if r["cpu_time"] > 0)
+        shares = [x for x in map(cpu_share, recs) if not math.isnan(x)]
+        s["cpu_share_median"] = float(np.median(shares)) if shares else math.nan
+        s["cpu_share_min"] = min(shares) if shares else math.nan
         s["cost"] = _mean_std(r["cost"] for r in solved)
         s["flight_time"] = _mean_std(r["flight_time"] for r in solved)
         s["time_to_first_solution"] = _mean_std(r["time_to_first_solution"] for r in solved)
@@ -307,6 +334,14 @@ def format_table(summary: dict[str, dict[str, Any]], time_limit: float) -> str:
         f"| time to first solution [s] | - | - | {ours(prim, 'time_to_first_solution')} "
         f"| {ours(cont, 'time_to_first_solution')} |"
     )
+
+    def share(s: dict[str, Any] | None) -> str:
+        if s is None or math.isnan(s.get("cpu_share_median", math.nan)):
+            return "-"
+        return f"median {s['cpu_share_median']:.2f} (min {s['cpu_share_min']:.2f})"
+
+    rows.append(f"| CPU share of the planning (CPU / wall time; 1 = a core to itself) | - | - | {share(prim)} "
+                f"| {share(cont)} |")  # fmt: skip
     if any(s is not None and "regret" in s for s in (prim, cont)):
 
         def reg(s: dict[str, Any] | None) -> str:
@@ -446,7 +481,11 @@ def write_report(
     ``reference``: the reference of the experiment's scenario, for the regret row."""
     summary = summarize(records, cfg.planners, reference)
     table = format_table(summary, cfg.time_limit)
-    atomic_write_text(cfg.out_dir / "summary.json", json.dumps(summary, indent=2, default=str))
+    warning = busy_warning(records)
+    if warning is not None:
+        table += f"\n\n**{warning}**"
+    summary_file = {**summary, "busy_warning": warning}
+    atomic_write_text(cfg.out_dir / "summary.json", json.dumps(summary_file, indent=2, default=str))
     path = cfg.out_dir / "table.md"
     atomic_write_text(path, table + "\n")
     return table, path

@@ -36,8 +36,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from baselines.evaluation import HELDOUT_SEED0, resolve_scenario
-from soaring_env.scenario import Scenario, atomic_write_text
+from soaring_env.scenario import HELDOUT_SEED0, Scenario, atomic_write_text, get_scenario
 
 DISCRETE_ID = "soaring/Soaring-v0"
 CONTINUOUS_ID = "soaring/SoaringContinuous-v0"
@@ -307,7 +306,7 @@ def validation_scenarios(n: int, random_scenario: Mapping[str, Any] | None = Non
     """The ``n`` validation scenarios (seeds ``VALIDATION_SEED0 ...``), disjoint from the test seeds."""
     if n > HELDOUT_SEED0 - VALIDATION_SEED0:
         raise ValueError(f"at most {HELDOUT_SEED0 - VALIDATION_SEED0} validation scenarios")
-    return [resolve_scenario(f"random-{VALIDATION_SEED0 + k}", random_scenario) for k in range(n)]
+    return [get_scenario(f"random-{VALIDATION_SEED0 + k}", random_scenario) for k in range(n)]
 
 
 def make_train_env(

@@ -2,7 +2,8 @@
 
 Rows: the paper's planner (``SST_CONFIGS["paper"]``: uniform samplers, no bound), the paper's
 planner with the glide mixture (the first step of the cumulative path paper -> + glide mixture ->
-+ cost bound = "soaring without goal completions" -> + completions = soaring), the soaring
++ cost bound = "soaring without goal completions" -> + completions = "soaring without local
+refinement" -> + refinements = soaring), the soaring
 configuration (``SST_CONFIGS["soaring"]``, the default) and the soaring configuration with each of
 its measures switched back to the paper's setting (leave one out: a measure earns its place when
 its row is worse than the soaring row). Every run plans from the scenario's start for ``--time``
@@ -27,17 +28,15 @@ import argparse
 import dataclasses
 import json
 import math
-import multiprocessing as mp
-import os
 import sys
 import time
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from baselines._runs import DirLock, check_cli_args, progress_bar, read_json, watch_parent
+from baselines._runs import DirLock, check_cli_args, progress_bar, read_json
+from baselines.backends import run_jobs
 from baselines.evaluation import heldout_names, resolve_scenario
 from baselines.reference import load_reference, reference_path, regret
 from baselines.sst.plan import make_planner
@@ -49,7 +48,8 @@ from soaring_env.scenario import atomic_write_text
 MEASURES: dict[str, dict[str, Any]] = {
     "glide mixture": {"glide_share": 0.0},
     "cost bound": {"cost_bound": False},
-    "goal completions": {"completions": 0},
+    "goal completions": {"completions": 0, "refinements": 0},
+    "local refinement": {"refinements": 0},
 }
 CHECKPOINTS = (1.0, 5.0)
 #: Regret at which a plan counts as near-best for the time-to-target column.
@@ -61,7 +61,8 @@ def rows() -> dict[str, SoaringSSTConfig]:
     soar = SST_CONFIGS["soaring"]
     paper = SST_CONFIGS["paper"]
     # the cumulative path paper -> + glide mixture -> + cost bound (= soaring without completions)
-    # -> + completions (= soaring), and leave-one-out rows
+    # -> + completions (= soaring without local refinement) -> + refinements (= soaring), and
+    # leave-one-out rows
     out = {"paper": paper, "paper + glide mixture": dataclasses.replace(paper, glide_share=soar.glide_share)}
     out["soaring"] = soar
     for name, off in MEASURES.items():
@@ -117,21 +118,11 @@ def run_all(jobs: list[dict[str, Any]], out: Path, workers: int, progress: bool)
             print(f"resuming: {len(jobs) - len(todo)} of {len(jobs)} runs already done in {out}", flush=True)
         if todo:
             bar = progress_bar(len(jobs), len(jobs) - len(todo), progress, "SST runs", "run")
-            for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
-                os.environ.setdefault(var, "1")
-            ctx = mp.get_context("spawn")
-            with ProcessPoolExecutor(
-                min(workers, len(todo)), ctx, initializer=watch_parent, initargs=(os.getpid(),)
-            ) as pool:
-                pending = {pool.submit(_run, j) for j in todo}
-                while pending:
-                    finished, pending = wait(pending, return_when=FIRST_COMPLETED)
-                    for fut in finished:
-                        r = fut.result()
-                        done[_key(r)] = r
-                        atomic_write_text(path, json.dumps({"schema": 1, "runs": sorted(done.values(), key=_key)}))
-                        if bar is not None:
-                            bar.update(1)
+            for _, r in run_jobs(_run, todo, workers=workers):
+                done[_key(r)] = r
+                atomic_write_text(path, json.dumps({"schema": 1, "runs": sorted(done.values(), key=_key)}))
+                if bar is not None:
+                    bar.update(1)
             if bar is not None:
                 bar.close()
     return [done[_key(j)] for j in jobs]

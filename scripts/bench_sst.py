@@ -2,8 +2,8 @@
 
 For both samplers (primitive, continuous) and six variants -- the soaring configuration (the
 default planner, ``SST_CONFIGS["soaring"]``), the paper's planner (``SST_CONFIGS["paper"]``,
-batched: K = 1024 expansions per round), the paper's planner one expansion at a time (K = 1: the
-published algorithm, grid nearest neighbours) and the plain reference implementation (brute-force
+batched: K expansions per round, K at the end of --help), the paper's planner one expansion at a
+time (K = 1: the published algorithm, grid nearest neighbours) and the plain reference implementation (brute-force
 nearest neighbours, one rollout per iteration), OMPL's SST and RRT -- it prints, as medians over the seeds: iterations
 per second (wall clock and CPU time), time to the first solution, the solution cost and its regret
 after 1, 5 and T seconds, the time to regret <= 0.1 and how many runs found a solution; and it
@@ -11,6 +11,7 @@ plots the anytime regret curves (median over the seeds) to ``--figure``.
 
     python scripts/bench_sst.py                    # 3 seeds x 20 s per row (about 15 minutes)
     python scripts/bench_sst.py --time 5 --seeds 2 # a quick look
+    python scripts/bench_sst.py --update --variants soaring   # rerun one variant, keep the other rows
 
 Targets: >= 40,000 iterations/s with the primitive sampler on one core (the paper's planner,
 batched); a solution in every run within 20 s for both samplers; a first solution within 50 ms.
@@ -168,7 +169,12 @@ def plot_anytime(rows: list[dict[str, Any]], regret_of: Any, t_lim: float, path:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    batch = ", ".join(f"{name} K = {cfg.batch_size}" for name, cfg in SST_CONFIGS.items())
+    ap = argparse.ArgumentParser(
+        description=__doc__,
+        epilog=f"Batch sizes of the batched variants (SST_CONFIGS[...].batch_size): {batch}.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     ap.add_argument("--seeds", type=int, default=3, help="seeds per row (medians are reported)")
     ap.add_argument("--time", type=float, default=20.0, help="planning time per run [s]")
     ap.add_argument("--samplers", nargs="+", default=list(SAMPLERS), choices=SAMPLERS)
@@ -180,6 +186,11 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--no-ompl", action="store_true", help="leave out OMPL's planners")
     ap.add_argument("--replot", action="store_true", help="only redraw --figure from the rows in --out")
+    ap.add_argument(
+        "--update",
+        action="store_true",
+        help="rerun only the given --samplers x --variants and keep the other rows of --out (same --time, --seeds)",
+    )
     args = ap.parse_args(argv)
     if args.seeds < 1 or not args.time > 0:
         ap.error(f"--seeds={args.seeds} must be >= 1 and --time={args.time} > 0")
@@ -222,6 +233,14 @@ def main(argv: list[str] | None = None) -> int:
         flush=True,
     )
     rows: list[dict[str, Any]] = []
+    kept: list[dict[str, Any]] = []
+    if args.update:
+        if not args.out.is_file():
+            ap.error(f"--update needs the results file {args.out}")
+        saved = json.loads(args.out.read_text())
+        if saved["time"] != args.time or saved["seeds"] != args.seeds:
+            ap.error(f"--update: {args.out} was run with --time {saved['time']:g} --seeds {saved['seeds']}")
+        kept = [r for r in saved["rows"] if not (r["sampler"] in args.samplers and r["variant"] in args.variants)]
     for sampler in args.samplers:
         for variant in args.variants:
             for seed in range(args.seeds):
@@ -236,6 +255,16 @@ def main(argv: list[str] | None = None) -> int:
                     f"cost {_fmt(r['cost_T'])} J/kg",
                     flush=True,
                 )
+    if kept:  # the table and figure cover every row, in the default order
+        rows = [
+            r
+            for smp in SAMPLERS
+            for var in VARIANTS
+            for r in (*kept, *rows)
+            if r["sampler"] == smp and r["variant"] == var
+        ]
+        args.samplers = [smp for smp in SAMPLERS if any(r["sampler"] == smp for r in rows)]
+        args.variants = [var for var in VARIANTS if any(r["variant"] == var for r in rows)]
     t = args.time
     lines = [
         f"| sampler | planner | it/s (wall) | it/s (CPU) | first solution [s] | cost @1 s | cost @5 s "

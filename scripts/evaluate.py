@@ -9,10 +9,14 @@ Examples::
     python scripts/evaluate.py --agents heuristic random --heldout 5
     # deterministic SST (iteration budget instead of wall clock)
     python scripts/evaluate.py --agents sst-primitives --sst-budget none --sst-iterations 2000
+    # the episodes in parallel: 4 local worker processes, or every CPU of a running Ray cluster
+    python scripts/evaluate.py --workers 4
+    python scripts/evaluate.py --backend ray --address auto
     python scripts/evaluate.py --list
 
 Writes ``<out>/results.json`` (atomically after every episode; a rerun resumes), ``results.md``,
-``boxplots.png`` and ``trajectories.png``.
+``boxplots.png`` and ``trajectories.png``. The results file is the same (but for the timings) for
+any ``--workers`` and ``--backend``; SST with a wall-clock budget depends on the machine's load.
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ import json
 import sys
 from pathlib import Path
 
-from baselines._runs import check_cli_args
+from baselines._runs import add_backend_args, check_cli_args, cli_workers
 from baselines.evaluation import (
     AGENT_NAMES,
     PPO_AGENTS,
@@ -66,6 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--quiet", action="store_true", help="no per-episode lines, no progress bar")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (per-episode lines stay)")
     p.add_argument("--list", action="store_true", help="list known agents and scenarios and exit")
+    add_backend_args(p, "1, one episode after another in this process")
     p.add_argument(
         "--reference-dir", default="results/reference", help="reference files for regret (scripts/reference.py)"
     )
@@ -121,6 +126,9 @@ def main(argv: list[str] | None = None) -> int:
             progress=not (args.quiet or args.no_progress),
             log=None if args.quiet else lambda line: print(line, flush=True),
             references=references,
+            workers=cli_workers(args, 1),
+            backend=args.backend,
+            address=args.address,
         )
     except (ConfigError, FileNotFoundError) as exc:
         p.print_usage(sys.stderr)  # argparse's usual usage + "error:" lines; status 2 as returned value

@@ -5,6 +5,7 @@ evaluation scenario -- lower bound, direct-flight cost and best plan per action 
     python scripts/reference.py                      # paper + 20 held-out scenarios, both action sets
     python scripts/reference.py --scenarios paper    # one scenario
     python scripts/reference.py --convergence        # paper: best cost as the beam width doubles
+    python scripts/reference.py --backend ray --address auto   # the scenarios as tasks on a Ray cluster
 
 Writes one JSON per scenario to ``results/reference/<name>.json`` (atomically, as soon as it is
 done; a rerun resumes and recomputes only files whose settings differ), ``table.md`` and
@@ -23,7 +24,7 @@ import sys
 import time
 from pathlib import Path
 
-from baselines._runs import check_cli_args
+from baselines._runs import add_backend_args, check_cli_args, cli_workers
 from baselines.evaluation import heldout_names, resolve_scenario
 from baselines.reference import ReferenceConfig, compute_reference
 from baselines.reference.runner import reference_table, run_references
@@ -39,7 +40,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--heldout", type=int, default=20, help="held-out scenarios random-10000 ... (default 20)")
     p.add_argument("--samplers", nargs="+", choices=SAMPLERS, default=list(SAMPLERS), help="action sets")
     p.add_argument("--beam-width", type=int, default=ReferenceConfig.beam_width, help="the accuracy knob")
-    p.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="parallel worker processes")
+    add_backend_args(p, "one per CPU core")
     p.add_argument("--out", type=Path, default=Path("results/reference"), help="output directory")
     p.add_argument("--fresh", action="store_true", help="recompute finished scenarios too")
     p.add_argument("--convergence", action="store_true", help="paper scenario at 1/2, 1 and 2 x the beam width")
@@ -54,9 +55,11 @@ def main(argv: list[str] | None = None) -> int:
         names = args.scenarios if args.scenarios is not None else ["paper", *heldout_names(args.heldout)]
         scenarios = [resolve_scenario(n) for n in names]
         t0 = time.perf_counter()
+        workers = cli_workers(args, os.cpu_count() or 1)
         print(
             f"reference search: {len(scenarios)} scenarios x {', '.join(args.samplers)}, beam width "
-            f"{cfg.beam_width}, {args.workers} workers -> {args.out}",
+            f"{cfg.beam_width}, {'all the cluster' if workers is None else workers} workers ({args.backend}) "
+            f"-> {args.out}",
             flush=True,
         )
         refs = run_references(
@@ -64,9 +67,11 @@ def main(argv: list[str] | None = None) -> int:
             args.out,
             samplers=args.samplers,
             config=cfg,
-            workers=args.workers,
+            workers=workers,
             fresh=args.fresh,
             progress=not args.no_progress,
+            backend=args.backend,
+            address=args.address,
         )
     except ConfigError as exc:
         p.error(str(exc))

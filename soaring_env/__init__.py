@@ -11,6 +11,7 @@ from soaring_env.env import (
 )
 from soaring_env.physics import Aircraft, G, Thermal, WindField, air_density, bank_angle
 from soaring_env.primitives import N_PRIMITIVES, PrimitiveLibrary, Rollout, rollout
+from soaring_env.scenario import Scenario, get_scenario, make_scenario
 
 # The Gymnasium envs register at import: gymnasium 1.x loads no entry-point plugins.
 register_envs()
@@ -24,6 +25,7 @@ __all__ = [
     "G",
     "PrimitiveLibrary",
     "Rollout",
+    "Scenario",
     "SoaringContinuousEnv",
     "SoaringEnv",
     "SoaringEnvConfig",
@@ -31,6 +33,8 @@ __all__ = [
     "WindField",
     "air_density",
     "bank_angle",
+    "get_scenario",
+    "make_scenario",
     "rollout",
 ]
 __version__ = "0.1.0"

@@ -8,6 +8,9 @@ locator that adds a hash of *every* ``.py`` file of the kernel's top-level packa
 (``soaring_env``, ``baselines``) to numba's source stamp: an edit to any of them makes every cached
 kernel of that package stale, and numba recompiles and rewrites it. Rule for new kernels: a kernel
 may use globals only from modules that import numba (those are the ones hashed).
+
+It also says once per process, on stderr, when a kernel of these packages misses the on-disk cache
+and is about to compile (:data:`COMPILE_NOTICE`): otherwise a first run sits silent for tens of seconds.
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import os
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +28,10 @@ FASTMATH = {"contract", "arcp", "reassoc"}
 
 #: Top-level packages whose kernels get the package-wide cache key.
 KERNEL_PACKAGES = ("soaring_env", "baselines")
+
+#: Printed on stderr before the first compilation of one of our kernels in a process (a cold or
+#: stale on-disk cache; a warm cache compiles nothing and prints nothing).
+COMPILE_NOTICE = "soaring-env: compiling numba kernels (first run only, ~10-30 s; cached on disk after) ..."
 
 
 @functools.cache
@@ -97,4 +105,39 @@ def _install_cache_key() -> None:
     CacheImpl._locator_classes.insert(0, PackageKeyLocator)
 
 
+def _install_compile_notice() -> None:
+    """Print :data:`COMPILE_NOTICE` when numba starts compiling one of our kernels.
+
+    numba's dispatcher looks an overload up in the on-disk cache first and fires the documented
+    ``"numba:compile"`` event (``numba.core.event``) only on a miss, just before it compiles: so
+    the notice appears exactly when the cache is cold or stale, before the wait, and never from a
+    warm cache. Compilations of callees and of later kernels in the same process stay silent.
+    """
+    try:
+        from numba.core import event
+    except ImportError:  # pragma: no cover - a numba without the event API: no notice
+        return
+    if globals().get("_notice_installed"):  # a reload re-runs this module in its old namespace
+        return
+    globals()["_notice_installed"] = True
+
+    class CompileNotice(event.Listener):
+        def __init__(self) -> None:
+            self.shown = False
+
+        def on_start(self, ev: Any) -> None:
+            if self.shown:
+                return
+            func = getattr(ev.data.get("dispatcher"), "py_func", None)
+            if str(getattr(func, "__module__", "")).split(".")[0] in KERNEL_PACKAGES:
+                self.shown = True
+                print(COMPILE_NOTICE, file=sys.stderr, flush=True)
+
+        def on_end(self, ev: Any) -> None:
+            pass
+
+    event.register("numba:compile", CompileNotice())
+
+
 _install_cache_key()
+_install_compile_notice()

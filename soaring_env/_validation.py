@@ -120,6 +120,21 @@ def as_float_array(name: str, value: object) -> np.ndarray:
     return arr.astype(np.float64, copy=False)
 
 
+def broadcast_flat(*values: object) -> tuple[tuple[int, ...], list[np.ndarray]]:
+    """Broadcast ``values`` together: their common shape, and each as a flat C-contiguous float64
+    array -- the caller's own memory where it already has that shape, else a fresh copy.
+
+    Never a view from ``np.broadcast_arrays``: numba reads the ``writeable`` flag of every array
+    argument, and numpy >= 2 answers that on such a view with a FutureWarning.
+    """
+    arrays = [np.asarray(v, dtype=np.float64) for v in values]
+    shape = np.broadcast_shapes(*(a.shape for a in arrays))
+    flat = [
+        np.ascontiguousarray(a).reshape(-1) if a.shape == shape else np.broadcast_to(a, shape).flatten() for a in arrays
+    ]
+    return shape, flat
+
+
 def check_choice(name: str, value: str, choices: Iterable[str]) -> str:
     options = tuple(choices)
     if value not in options:

@@ -4,6 +4,11 @@ The named ``"paper"`` scenario reproduces the setting of the paper's figure 2: o
 the start and the goal region. Its geometry is our choice (the paper gives none): start at the
 origin heading north at 300 m, goal 3 km north at 300 m (radius 150 m), an Allen thermal of
 w* = 2.56 m/s, zi = 1400 m (Allen's worked example) at 1.5 km north, 250 m east of the direct line.
+
+Scenario names are one namespace, resolved by :func:`get_scenario` wherever a scenario is taken by
+name (``gym.make(..., scenario=...)``, ``env.reset(options={"scenario": ...})``, the evaluation):
+``"paper"``, ``"random-<seed>"`` (held-out test set: ``random-10000``, ...) and paths to ``.json``
+files of :meth:`Scenario.save`; the envs add the mode ``"random"`` (a new scenario at every reset).
 """
 
 from __future__ import annotations
@@ -12,7 +17,9 @@ import dataclasses
 import json
 import math
 import os
+import re
 import tempfile
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -301,12 +308,74 @@ def paper_scenario() -> Scenario:
 
 SCENARIOS = {"paper": paper_scenario}
 
+#: The envs' scenario mode that draws a new random scenario at every reset (a mode, not one scenario).
+RANDOM = "random"
+#: First seed of the held-out test scenarios ``random-10000``, ``random-10001``, ... (training draws
+#: from each env's own stream; PPO's validation scenarios use seeds 5000+).
+HELDOUT_SEED0 = 10_000
+_RANDOM_SEED = re.compile(r"^random-([0-9]+)$")
+_FORMS = (
+    "random-<seed> (a random scenario drawn with that seed; held-out: random-10000, random-10001, ...), "
+    "a path to a scenario file (*.json, written by Scenario.save), "
+    f"and in the envs {RANDOM!r} (a new random scenario at every reset)"
+)
 
-def get_scenario(name: str) -> Scenario:
-    """A named scenario; raises with the list of known names."""
-    if name not in SCENARIOS:
-        raise ConfigError(f"scenario {name!r} is unknown; known: {', '.join(sorted(SCENARIOS))}")
-    return SCENARIOS[name]()
+
+def heldout_names(n: int, start: int = HELDOUT_SEED0) -> list[str]:
+    """Names of the first ``n`` held-out random scenarios (``random-10000``, ...)."""
+    return [f"random-{start + k}" for k in range(n)]
+
+
+def _parse_name(name: str | os.PathLike[str]) -> tuple[str, Any]:
+    """What a scenario name refers to: ``("named", factory)``, ``("random", seed)`` or ``("file", path)``.
+
+    One namespace for every place that takes a scenario by name: a name of :data:`SCENARIOS`,
+    ``"random-<seed>"``, or a path (a ``PathLike``, or a string ending in ``.json``).
+    """
+    if isinstance(name, os.PathLike):
+        return "file", Path(name)
+    if not isinstance(name, str):
+        raise ConfigError(f"scenario={name!r} has type {type(name).__name__}; a scenario name or path is required")
+    if name in SCENARIOS:
+        return "named", SCENARIOS[name]
+    m = _RANDOM_SEED.match(name)
+    if m:
+        return "random", int(m.group(1))
+    if name.lower().endswith(".json"):
+        return "file", Path(name)
+    if name == RANDOM:
+        raise ConfigError(
+            f"scenario {RANDOM!r} names no single scenario: it is the envs' mode that draws a new one at every "
+            "reset (gym.make(..., scenario='random')); for one random scenario use 'random-<seed>', e.g. 'random-10000'"
+        )
+    raise ConfigError(f"scenario {name!r} is unknown; known: {', '.join(sorted(SCENARIOS))}, {_FORMS}")
+
+
+def check_scenario_name(name: str) -> str:
+    """``name`` if it has the form of a scenario name (the file of a ``.json`` path is read only by
+    :func:`get_scenario`), else a :class:`ConfigError` listing the known names and forms."""
+    _parse_name(name)
+    return name
+
+
+def get_scenario(name: str | os.PathLike[str], random_scenario: Mapping[str, Any] | None = None) -> Scenario:
+    """The scenario a name refers to; the one resolver behind ``gym.make(..., scenario=...)``,
+    ``env.reset(options={"scenario": ...})`` and the evaluation's scenario names.
+
+    :param name: a named scenario (``"paper"``); ``"random-<seed>"``: :func:`make_scenario` drawn
+        from ``np.random.default_rng(seed)`` with ``random_scenario``, named ``name`` (the
+        held-out test set is :func:`heldout_names`); or a path to a JSON file of :meth:`Scenario.save`.
+    :param random_scenario: :func:`make_scenario` keywords for ``"random-<seed>"`` (an env's
+        ``random_scenario``, so that held-out scenarios follow its training distribution); ignored
+        by the other forms.
+    :raises ConfigError: for an unknown name (listing the known names and forms) or a bad file.
+    """
+    kind, value = _parse_name(name)
+    if kind == "named":
+        return value()
+    if kind == "random":
+        return make_scenario(np.random.default_rng(value), **{**dict(random_scenario or {}), "name": str(name)})
+    return Scenario.load(value)
 
 
 #: Goal radius of random scenarios [m].

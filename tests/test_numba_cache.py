@@ -70,3 +70,31 @@ def test_edited_dependency_is_recompiled(tmp_path: Path) -> None:
     third = _probe(tmp_path)
     assert third["thrust"] == second["thrust"]
     assert third["h"] > second["h"] + 10.0  # twice the updraft in the thermal core: a much higher climb
+
+
+NOTICE_PROBE = """
+import soaring_env
+from soaring_env import air_density
+from soaring_env.scenario import paper_scenario
+print(float(paper_scenario().field.updraft(1500.0, 250.0, 300.0)), float(air_density(300.0)))
+"""
+
+
+def test_cold_cache_says_it_compiles_once(tmp_path: Path) -> None:
+    """A cold on-disk cache prints the compile notice once (two kernels compile), a warm one never."""
+    from soaring_env._jit import COMPILE_NOTICE
+
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+
+    def run() -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            [sys.executable, "-c", NOTICE_PROBE], env=env, capture_output=True, text=True, timeout=300, check=True
+        )
+
+    cold = run()
+    assert cold.stderr.count(COMPILE_NOTICE) == 1, cold.stderr
+    assert COMPILE_NOTICE not in cold.stdout
+    assert any(tmp_path.rglob("*.nbi")), "nothing was cached in NUMBA_CACHE_DIR"
+    warm = run()
+    assert COMPILE_NOTICE not in warm.stderr, warm.stderr
+    assert warm.stdout == cold.stdout

@@ -269,6 +269,25 @@ def test_updraft_rejects_non_finite_points() -> None:
         f.updraft(math.inf, 0.0, 100.0)
 
 
+@pytest.mark.filterwarnings("error")  # numpy's FutureWarning on broadcast views passed to numba
+@pytest.mark.parametrize(
+    "shapes", [((), (), ()), ((1,), (), ()), ((1, 1), (2,), ()), ((3, 1), (1, 2), (1,)), ((2,), (2,), (2,))]
+)
+def test_updraft_and_glide_broadcast_without_warnings(shapes: tuple[tuple[int, ...], ...]) -> None:
+    """Scalars and any broadcastable shapes: no warning, numpy's broadcast shape, the same values
+    as point by point."""
+    f = WindField(thermals=(Thermal(0.0, 0.0),))
+    north, east, height = (np.full(s, v) if s else v for s, v in zip(shapes, (20.0, -30.0, 300.0), strict=True))
+    want = np.broadcast_shapes(*shapes)
+    w = f.updraft(north, east, height)
+    assert w.shape == want and w.dtype == np.float64
+    np.testing.assert_array_equal(w, np.full(want, float(f.updraft(20.0, -30.0, 300.0))))
+    ac = Aircraft()
+    g = ac.glide_angle(np.full(shapes[0], 15.0), np.full(shapes[1], 0.05), 1500.0)
+    assert g.shape == np.broadcast_shapes(shapes[0], shapes[1])
+    np.testing.assert_array_equal(g, np.full(g.shape, float(ac.glide_angle(15.0, 0.05, 1500.0))))
+
+
 # ----------------------------------------------------------------------------------------------
 # Gaussian thermal
 # ----------------------------------------------------------------------------------------------

@@ -273,3 +273,83 @@ def test_replace_revalidates() -> None:
     assert moved.start == (100.0, 0.0, 0.0, 300.0) and moved.goal == sc.goal
     with pytest.raises(ConfigError, match="start position"):
         sc.replace(start=(0.0, 0.0, 0.0, -1.0))
+
+
+# --- one namespace of scenario names ----------------------------------------------------------------
+def test_scenario_names_resolve_everywhere_alike(tmp_path: Path) -> None:
+    """A name, ``random-<seed>`` and a JSON path give the same scenario in get_scenario, gym.make,
+    env.reset(options=...), the vector env and the evaluation (which re-exports get_scenario)."""
+    import gymnasium as gym
+
+    import soaring_env
+    from baselines import evaluation
+
+    path = tmp_path / "mine.json"
+    mine = make_scenario(np.random.default_rng(3), name="mine")
+    mine.save(path)
+    expected = {
+        "paper": paper_scenario(),
+        "random-10000": make_scenario(np.random.default_rng(10_000), name="random-10000"),
+        str(path): mine,
+    }
+    assert soaring_env.get_scenario is get_scenario and evaluation.resolve_scenario is get_scenario
+    assert get_scenario(path) == mine  # a PathLike too
+    env = gym.make("soaring/Soaring-v0")
+    venv = gym.make_vec("soaring/Soaring-v0", num_envs=2, vectorization_mode="vector_entry_point")
+    for name, sc in expected.items():
+        assert get_scenario(name) == sc
+        assert evaluation.check_scenario_name(name) == name
+        assert gym.make("soaring/Soaring-v0", scenario=name).unwrapped.scenario == sc
+        env.reset(seed=0, options={"scenario": name})
+        assert env.unwrapped.scenario == sc
+        venv.reset(seed=0, options={"scenario": name})
+        assert all(s == sc for s in venv.unwrapped.scenarios)
+    env.close()
+    venv.close()
+    # a pathlib.Path in gym.make is stored as a string (configs are saved as JSON)
+    assert gym.make("soaring/Soaring-v0", scenario=path).unwrapped.config.scenario == str(path)
+
+
+def test_random_seed_names_follow_the_random_scenario_keywords() -> None:
+    import gymnasium as gym
+
+    kw = {"n_thermals": (4, 4), "wind_speed": (0.0, 0.0)}
+    sc = get_scenario("random-10001", kw)
+    assert len(sc.field.thermals) == 4 and sc.name == "random-10001"
+    assert sc == get_scenario("random-10001", {**kw, "name": "ignored"})  # the name is the seed's
+    env = gym.make("soaring/Soaring-v0", scenario="random-10001", random_scenario=kw)
+    assert env.unwrapped.scenario == sc
+    env.reset(seed=0, options={"scenario": "random-10002"})
+    assert len(env.unwrapped.scenario.field.thermals) == 4
+    assert get_scenario("random-10001") != sc  # without the keywords: the default distribution
+
+
+def test_heldout_names_live_with_the_scenarios() -> None:
+    from baselines import evaluation
+    from soaring_env.scenario import HELDOUT_SEED0, heldout_names
+
+    assert heldout_names(2) == ["random-10000", "random-10001"] and HELDOUT_SEED0 == 10_000
+    assert evaluation.heldout_names is heldout_names and evaluation.HELDOUT_SEED0 == HELDOUT_SEED0
+
+
+@pytest.mark.parametrize(
+    ("name", "match"),
+    [
+        ("nope", r"scenario 'nope' is unknown; known: paper, random-<seed> .*\*\.json.*'random'"),
+        ("random-", "unknown"),
+        ("random-x1", "unknown"),
+        ("random", r"names no single scenario.*random-<seed>"),
+        ("missing.json", r"cannot read scenario file 'missing\.json'"),
+        (42, "has type int"),
+    ],
+)
+def test_unknown_scenario_names_list_the_forms(name: object, match: str) -> None:
+    import gymnasium as gym
+
+    with pytest.raises(ConfigError, match=match):
+        get_scenario(name)  # type: ignore[arg-type]
+    if name != "random":  # (the envs' mode)
+        with pytest.raises(ConfigError):
+            gym.make("soaring/Soaring-v0", scenario=name)
+        with pytest.raises(ConfigError):
+            gym.make("soaring/Soaring-v0").reset(options={"scenario": name})

@@ -88,3 +88,26 @@ def test_table_with_failures_only() -> None:
 def test_bad_experiment_config(kwargs: dict, match: str) -> None:
     with pytest.raises(SSTError, match=match):
         ExperimentConfig(**kwargs)
+
+
+def test_cpu_share_is_reported_and_a_busy_machine_is_flagged(tmp_path: Path) -> None:
+    from baselines.experiment import BUSY_CPU_SHARE, busy_warning
+
+    def rec(planner: str, cpu: float) -> dict:
+        return {"planner": planner, "solved": False, "cost": None, "flight_time": None, "iterations": 10,
+                "active": 1, "total": 1, "witnesses": 1, "cpu_time": cpu, "wall_time": 1.0, "elapsed": 1.0,
+                "time_to_first_solution": None}  # fmt: skip
+
+    quiet = [rec("primitive", 0.99), rec("continuous", 0.97), rec("continuous", 0.5)]
+    assert busy_warning(quiet) is None
+    table = format_table(summarize(quiet), 1.0)
+    assert "| CPU share of the planning" in table and "median 0.99 (min 0.99)" in table
+    assert "median 0.73 (min 0.50)" in table
+    busy = [rec("primitive", 0.6), rec("continuous", 0.5), rec("continuous", 0.95)]
+    warning = busy_warning(busy)
+    assert warning is not None and "machine was busy" in warning and "not comparable" in warning
+    assert f"{BUSY_CPU_SHARE:g}" in warning and "median CPU share of the planning was 0.60" in warning
+    cfg = ExperimentConfig(runs=1, out_dir=tmp_path)
+    table, path = write_report(cfg, busy)
+    assert warning in table and warning in path.read_text()
+    assert json.loads((tmp_path / "summary.json").read_text())["busy_warning"] == warning

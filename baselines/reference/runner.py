@@ -1,19 +1,18 @@
 """The reference table: :func:`~baselines.reference.yardstick.compute_reference` for many scenarios
-in parallel worker processes, one JSON file per scenario (written atomically as soon as it is
-done, so an interrupted run resumes), and the markdown table built from those files.
+in parallel jobs (:func:`baselines.backends.run_jobs`: local worker processes or a Ray cluster),
+one JSON file per scenario (written atomically by this process as soon as it is done, so an
+interrupted run resumes), and the markdown table built from those files.
 """
 
 from __future__ import annotations
 
 import math
-import multiprocessing as mp
-import os
 from collections.abc import Mapping, Sequence
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
 from typing import Any
 
-from baselines._runs import DirLock, progress_bar, watch_parent
+from baselines._runs import DirLock, progress_bar
+from baselines.backends import check_backend, run_jobs
 from baselines.reference.beam import ReferenceConfig
 from baselines.reference.yardstick import (
     ScenarioReference,
@@ -23,20 +22,22 @@ from baselines.reference.yardstick import (
     save_reference,
 )
 from baselines.sst.soaring import SAMPLERS
-from soaring_env._validation import ConfigError, check_int
+from soaring_env._validation import ConfigError
 from soaring_env.scenario import Scenario
 
 
-def _job(args: tuple[dict[str, Any], tuple[str, ...], dict[str, Any], str]) -> str:
-    sc_dict, samplers, cfg_dict, path = args
-    ref = compute_reference(Scenario.from_dict(sc_dict), samplers, ReferenceConfig(**cfg_dict))
-    p = Path(path)
-    if p.exists():  # keep the other action sets of an existing file for the same scenario
-        old = load_reference(p)
+def _job(args: tuple[dict[str, Any], tuple[str, ...], dict[str, Any]]) -> ScenarioReference:
+    sc_dict, samplers, cfg_dict = args
+    return compute_reference(Scenario.from_dict(sc_dict), samplers, ReferenceConfig(**cfg_dict))
+
+
+def _save(ref: ScenarioReference, path: Path) -> None:
+    """Write ``ref``, keeping the other action sets of an existing file for the same scenario."""
+    if path.exists():
+        old = load_reference(path)
         if old.scenario == ref.scenario:
             ref = ScenarioReference(ref.scenario, ref.lower_bound, {**old.samplers, **ref.samplers})
     save_reference(ref, path)
-    return path
 
 
 def _is_current(path: Path, scenario: Scenario, samplers: Sequence[str], cfg: ReferenceConfig) -> bool:
@@ -54,9 +55,11 @@ def run_references(
     *,
     samplers: Sequence[str] = SAMPLERS,
     config: ReferenceConfig | None = None,
-    workers: int = 1,
+    workers: int | None = 1,
     fresh: bool = False,
     progress: bool = True,
+    backend: str = "local",
+    address: str | None = None,
 ) -> dict[str, ScenarioReference]:
     """Compute (or load, if already done with the same settings) the reference of every scenario.
 
@@ -64,15 +67,17 @@ def run_references(
     :param out_dir: folder of the ``<name>.json`` files (one writer at a time: a lock file).
     :param samplers: action sets.
     :param config: search settings.
-    :param workers: parallel worker processes (each single-threaded).
+    :param workers: scenarios at a time, each single-threaded (None: every CPU of the backend).
     :param fresh: recompute even finished files.
     :param progress: show a progress bar (tqdm, if installed).
+    :param backend: ``"local"`` (worker processes) or ``"ray"`` (see :mod:`baselines.backends`).
+    :param address: with ``backend="ray"``: a running cluster's address (None: a local Ray instance).
     :returns: the references by scenario name, in the order given.
     """
     cfg = config if config is not None else ReferenceConfig()
     if not isinstance(cfg, ReferenceConfig):
         raise ConfigError(f"config={cfg!r} must be a ReferenceConfig")
-    check_int("workers", workers, 1)
+    check_backend(backend, workers, address)
     if not all(isinstance(s, Scenario) for s in scenarios):
         raise ConfigError("scenarios must be soaring_env.scenario.Scenario objects")
     names = [s.name for s in scenarios]
@@ -86,19 +91,11 @@ def run_references(
             print(f"resuming: {done} of {len(scenarios)} scenarios already done in {out}", flush=True)
         if todo:
             bar = progress_bar(len(scenarios), done, progress, "reference (the first compiles the kernels)", "scenario")
-            for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
-                os.environ.setdefault(var, "1")
-            jobs = [(s.to_dict(), tuple(samplers), cfg.to_dict(), str(reference_path(out, s.name))) for s in todo]
-            n = min(workers, len(jobs))
-            ctx = mp.get_context("spawn")
-            with ProcessPoolExecutor(n, ctx, initializer=watch_parent, initargs=(os.getpid(),)) as pool:
-                pending = {pool.submit(_job, j) for j in jobs}
-                while pending:
-                    finished, pending = wait(pending, return_when=FIRST_COMPLETED)
-                    for fut in finished:
-                        fut.result()
-                        if bar is not None:
-                            bar.update(1)
+            jobs = [(s.to_dict(), tuple(samplers), cfg.to_dict()) for s in todo]
+            for i, ref in run_jobs(_job, jobs, workers=workers, backend=backend, address=address):
+                _save(ref, reference_path(out, todo[i].name))
+                if bar is not None:
+                    bar.update(1)
             if bar is not None:
                 bar.close()
     return {s.name: load_reference(reference_path(out, s.name)) for s in scenarios}

@@ -228,6 +228,10 @@ class SSTParams:
         ``completions`` cheapest children accepted in a round are each continued with the problem's
         ``goal_controls`` (a steering rule towards the goal) for up to ``completion_depth`` edges.
     :param completion_depth: most edges of one completion.
+    :param refinements: extra completions per round around the best solution (0: none): each starts
+        at a distinct active node of the best solution's path (uniform), flies one random control
+        (``sample_controls``), then the steering rule -- a local search that perturbs the incumbent
+        one edge at a time.
     """
 
     selection_radius: float = 1.0
@@ -237,6 +241,7 @@ class SSTParams:
     initial_capacity: int = 4096
     completions: int = 0
     completion_depth: int = 10
+    refinements: int = 0
 
     def __post_init__(self) -> None:
         _positive("selection_radius", self.selection_radius)
@@ -247,6 +252,7 @@ class SSTParams:
         _int("initial_capacity", self.initial_capacity, 16)
         _int("completions", self.completions, 0, 1 << 20)
         _int("completion_depth", self.completion_depth, 1, 1 << 20)
+        _int("refinements", self.refinements, 0, 1 << 20)
 
     @property
     def depth_limit(self) -> int:
@@ -531,7 +537,7 @@ class SST:
             n_imp = self._insert(sel, e, u, imp_k)
             done += n
             self.stats.iterations += n
-            if self.params.completions:
+            if self.params.completions or self.params.refinements:
                 n_imp += self._complete()
             now = time.perf_counter()
             self.stats.elapsed = base_elapsed + (now - t_start)
@@ -578,6 +584,14 @@ class SST:
             return 0
         ids = ids[np.argsort(a["cost"][ids], kind="stable")[: self.params.completions]]
         ids = ids[a["status"][ids] == K.ACTIVE]
+        n_ref = 0
+        if self.params.refinements and self.best_node >= 0:
+            # distinct start nodes: two chains from one parent could collide in one insert call
+            path = np.asarray(self.path_to(self.best_node)[:-1], np.int64)
+            path = path[(a["status"][path] == K.ACTIVE) & ~np.isin(path, ids)]
+            if len(path):
+                n_ref = min(self.params.refinements, len(path))
+                ids = np.concatenate([ids, self.rng.choice(path, size=n_ref, replace=False)])
         m, depth = len(ids), self.params.completion_depth
         if m == 0:
             return 0
@@ -595,6 +609,10 @@ class SST:
         d0 = a["depth"][ids]
         for d in range(depth):
             u = np.asarray(steer(x), np.float64).reshape(len(live), self._cdim)
+            if d == 0 and n_ref:  # the refinements leave the incumbent's path on a random control
+                u[m - n_ref :] = np.asarray(self.problem.sample_controls(self.rng, n_ref), np.float64).reshape(
+                    n_ref, self._cdim
+                )
             e = self.problem.propagate(x, u)
             self.stats.iterations += len(live)
             self.stats.completion_edges += len(live)
@@ -628,12 +646,17 @@ class SST:
         last = length - 1
         reached = oc[np.arange(m), last] == K.EDGE_GOAL
         if reached.any():
-            total = a["cost"][ids] + np.where(np.arange(depth)[None, :] < length[:, None], ec, 0.0).sum(axis=1)
+            # costs to come summed edge by edge, in the kernel's order: a completion that re-flies
+            # the incumbent (a refinement whose random control is the incumbent's) must not look
+            # cheaper by rounding -- its chain would end in a rejected goal edge
+            edge = np.where(np.arange(depth)[None, :] < length[:, None], ec, 0.0)
+            seq = np.cumsum(np.concatenate([a["cost"][ids][:, None], edge], axis=1), axis=1)
+            total = seq[:, -1]
             c = int(np.flatnonzero(reached)[np.argmin(total[reached])])
             if total[c] < self._best_cost[0]:
                 # start after the deepest edge of it that is still in the tree
                 # (still the same node: a freed slot may hold another one by now)
-                come = a["cost"][ids[c]] + np.cumsum(ec[c])
+                come = seq[c, 1:]
                 start, parent = 0, int(ids[c])
                 if a["status"][parent] not in (K.ACTIVE, K.INACTIVE) or not np.array_equal(
                     a["X"][parent], x0[c], equal_nan=True

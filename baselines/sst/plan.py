@@ -168,6 +168,7 @@ def make_planner(
         max_depth=cfg.max_edges,
         completions=cfg.completions,
         completion_depth=cfg.completion_depth,
+        refinements=cfg.refinements,
     )
     planner: SST | ReferenceSST = (ReferenceSST if reference else SST)(problem, params, seed=seed)
     return problem, planner

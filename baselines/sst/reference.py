@@ -32,11 +32,12 @@ class ReferenceSST:
             raise SSTError(f"problem={problem!r} does not implement the Problem protocol")
         self.problem = problem
         self.params = params or SSTParams()
-        if self.params.completions:
-            raise SSTError(
-                f"completions={self.params.completions!r}: ReferenceSST is the published algorithm; the goal "
-                "completions are an extension of the batched SST only; allowed: 0"
-            )
+        for name in ("completions", "refinements"):
+            if getattr(self.params, name):
+                raise SSTError(
+                    f"{name}={getattr(self.params, name)!r}: ReferenceSST is the published algorithm; the goal "
+                    "completions and refinements are an extension of the batched SST only; allowed: 0"
+                )
         self.rng = np.random.default_rng(check_seed("seed", seed))
         sp = problem.space
         self.space = sp

@@ -96,6 +96,10 @@ class SoaringSSTConfig:
     :param thermal_target_radius: radius of those discs [m].
     :param cost_bound: drop children that cannot beat the best solution by the admissible bound
         ``-g (h_cap - h)`` on the cost still to go (:meth:`SoaringModel.end_height_cap`).
+    :param completions: greedy goal completions per round (``goal_controls``; 0: none).
+    :param completion_depth: most edges of one completion.
+    :param refinements: completions per round that leave the best plan's path on a random control
+        (see :class:`~baselines.sst.core.SSTParams`; 0: none).
     """
 
     selection_radius: float = 500.0
@@ -113,6 +117,7 @@ class SoaringSSTConfig:
     cost_bound: bool = True
     completions: int = 8
     completion_depth: int = 20
+    refinements: int = 8
 
     def __post_init__(self) -> None:
         for name in ("selection_radius", "pruning_radius", "heading_scale", "height_scale"):
@@ -136,12 +141,21 @@ class SoaringSSTConfig:
         check_bool("cost_bound", self.cost_bound)
         check_int("completions", self.completions, 0, 1 << 20)
         check_int("completion_depth", self.completion_depth, 1, 1 << 20)
+        check_int("refinements", self.refinements, 0, 1 << 20)
 
+
+#: Version of the completions' steering rule (:meth:`SoaringProblem.goal_controls`): bump it when
+#: the rule's behaviour changes, so that results keyed by it (the evaluation's agent settings) are
+#: redone. 2: final glide aimed at the goal's top - r/20; the primitives' homeward choice through
+#: the model (2026-12-02).
+STEERING_VERSION = 2
 
 #: Named planner configurations: ``"paper"`` is the paper's SST (uniform samplers, no cost bound);
 #: ``"soaring"`` (the default) adds the measures of the README's ablation table.
 SST_CONFIGS: dict[str, SoaringSSTConfig] = {
-    "paper": SoaringSSTConfig(glide_share=0.0, circle_share=0.0, thermal_targets=0.0, cost_bound=False, completions=0),
+    "paper": SoaringSSTConfig(
+        glide_share=0.0, circle_share=0.0, thermal_targets=0.0, cost_bound=False, completions=0, refinements=0
+    ),
     "soaring": SoaringSSTConfig(),
 }
 
@@ -251,6 +265,12 @@ class SoaringProblem:
                 self._arc_rates = np.unique(table[slow, COL_CHI_DOT_1])
             level = allowed & (table[:, COL_GAMMA] == 0.0)
             self._near_ids = np.flatnonzero(level if level.any() else allowed)
+            self._home_ids = np.flatnonzero(allowed)
+            # powered level flight per edge [J/kg] at each airspeed (still air, start height): the
+            # homeward primitives' price of the distance they leave
+            self._level_speeds = np.unique(table[allowed, COL_AIRSPEED])
+            power = model.aircraft.fuel_power(self._level_speeds, 0.0, 0.0, float(x0[3]))
+            self._level_edge_cost = power * model.library.duration
         rates = self._arc_rates
         self._tight_rates = np.array([-top, -0.75 * top, 0.75 * top, top])
         if sampler == "primitive":
@@ -310,8 +330,8 @@ class SoaringProblem:
     def goal_controls(self, states: np.ndarray) -> np.ndarray:
         """The steering rule of the greedy goal completions: glide home, or climb in a thermal first.
 
-        Per core state, with ``aim = goal top - radius / 10`` and the flattest zero-thrust glide
-        (best-glide airspeed, still air):
+        Per core state, with ``aim = goal top - radius / 20`` (continuous; primitives: ``- radius / 4``)
+        and the flattest zero-thrust glide (best-glide airspeed, still air):
 
         * high enough to glide to the aim height over the remaining distance: turn towards the goal
           centre (course rate = course error / Ts, within the envelope) on the path angle that
@@ -328,7 +348,9 @@ class SoaringProblem:
           such edge of it, so as not to overshoot), powered only if a glide would arrive below 50 m;
         * no thermals: fly to the aim height (a powered climb where needed).
 
-        The primitive sampler takes the nearest single-segment primitive in normalized controls.
+        The primitive sampler takes the nearest single-segment primitive in normalized controls to
+        reach a thermal, the model-scored level arc in it (:meth:`_best_primitive_arc`), and on the
+        way home the primitive that leaves the least to fly (:meth:`_best_home_primitive`).
         """
         m = self.model
         lo, hi = m.control_low, m.control_high
@@ -343,7 +365,9 @@ class SoaringProblem:
 
         chi_dot, d_goal = towards(np.full_like(n_, g.north), np.full_like(e_, g.east))
         dist = np.maximum(d_goal - 0.5 * g.radius, 1.0)
-        aim = g.height + (0.75 if self.kind == "primitive" else 0.9) * g.radius  # primitives arrive level
+        # aim just below the top (continuous: every metre kept is energy; 0.9 r cost ~50 J/kg more on
+        # `paper`); the primitives arrive level, so lower, inside the region
+        aim = g.height + (0.75 if self.kind == "primitive" else 0.95) * g.radius
         gamma = np.arctan2(aim - h, dist)
         # glide home at the present airspeed (no kinetic charge) where its glide suffices
         v_now = np.clip(np.where(np.isfinite(states[:, S_V]), states[:, S_V], self._glide_speed), lo[0], hi[0])
@@ -400,6 +424,11 @@ class SoaringProblem:
             pick = self._steer_ids[np.argmin(d2, axis=1)]
             if f.thermals:
                 pick = np.where(prim >= 0, prim, pick)
+                home = ~(low | circle)
+            else:
+                home = np.ones(len(states), bool)
+            if home.any():  # homeward: the primitive that leaves the least to fly, through the model
+                pick[home] = self._best_home_primitive(states[home])
             return pick.astype(np.float64)[:, None]
         out = act.astype(np.float32).astype(np.float64)
         if exact_glide.any():
@@ -473,6 +502,38 @@ class SoaringProblem:
         )
         j = np.argmax(score, axis=1)
         return ids[j], score[np.arange(n), j], end[np.arange(n), j, S_H]
+
+    def _best_home_primitive(self, states: np.ndarray) -> np.ndarray:
+        """The homeward primitive of each state: every allowed primitive is flown through the model
+        and scored by its exact cost plus the cheapest level flight [J/kg per m] over the horizontal
+        distance it leaves to the goal region (zero on a goal edge), so that lift on the way home
+        and a slow, cheap airspeed in it are used where they pay."""
+        ids = self._home_ids
+        n, k = len(states), len(ids)
+        e = self.propagate(np.repeat(states, k, axis=0), np.tile(ids, n).astype(np.float64)[:, None])
+        g = self.model.scenario.goal
+        end = e.states
+        # the region is a ball: at height h it reaches sqrt(r^2 - (h - h_goal)^2) out; height above
+        # it must be lost on the way (charged as potential: g per metre)
+        dh = end[:, S_H] - g.height
+        reach = np.sqrt(np.maximum(g.radius**2 - dh**2, 0.0))
+        dn, de = g.north - end[:, S_N], g.east - end[:, S_E]
+        left = np.maximum(np.hypot(dn, de) - reach, 0.0)
+        # facing away costs a turn: about its arc on a 100 m circle (a 10 m/s half turn per edge)
+        err = np.abs(np.mod(np.arctan2(de, dn) - end[:, S_CHI] + math.pi, 2.0 * math.pi) - math.pi)
+        left = left + np.where(left > 0.0, 100.0 * err, 0.0)
+        above = np.maximum(dh - 0.95 * g.radius, 0.0)
+        # level flight home at the best airspeed v: whole edges (a goal edge is charged in full),
+        # plus the kinetic charge of speeding up from the edge's airspeed
+        v, edge, eta = self._level_speeds, self._level_edge_cost, self.model.aircraft.eta_ec * self.model.aircraft.eta_p
+        ts = self.model.library.duration
+        v0 = end[:, S_V][:, None]
+        n_legs = left[:, None] / (v[None, :] * ts)
+        legs = (np.ceil(n_legs) + 0.1 * n_legs) * edge[None, :]  # whole edges; the rest breaks ties
+        togo = (legs + np.maximum(0.5 * (v[None, :] ** 2 - v0**2), 0.0) / eta).min(axis=1) + G * above
+        score = e.cost + np.where(e.outcome == EDGE_GOAL, 0.0, togo)
+        score = np.where(e.outcome == EDGE_INVALID, np.inf, score).reshape(n, k)
+        return ids[np.argmin(score, axis=1)]
 
     def glide_action(self, actions: np.ndarray) -> np.ndarray:
         """The float32-exact normalized path-angle component of the zero-thrust glide for each

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -17,15 +18,14 @@ import numpy as np
 from soaring_env._validation import ConfigError, check_bool, check_finite, check_int, check_positive, check_range
 from soaring_env.physics.aircraft import Aircraft
 from soaring_env.primitives import DEFAULT_MAX_SUBSTEP, MAX_POINTS, check_duration, check_substep
-from soaring_env.scenario import SCENARIOS, Scenario, get_scenario, make_scenario
+from soaring_env.scenario import RANDOM, Scenario, get_scenario, make_scenario
 
 #: Reward scale: one reward unit is one kJ/kg of specific energy.
 ENERGY_SCALE = 1000.0
 
-#: Scenario mode that draws a new random scenario from ``env.np_random`` at every reset.
-RANDOM = "random"
-
-ScenarioSpec = str | Scenario | Mapping[str, Any]
+#: A scenario as the envs take it: a name or path of :func:`~soaring_env.scenario.get_scenario`,
+#: ``"random"`` (a new scenario drawn from ``env.np_random`` at every reset), a Scenario or its dict.
+ScenarioSpec = str | os.PathLike[str] | Scenario | Mapping[str, Any]
 
 
 @dataclass(frozen=True)
@@ -33,11 +33,13 @@ class SoaringEnvConfig:
     """Everything that defines a soaring environment (all fields validated on construction).
 
     :param scenario: ``"paper"`` (default: the paper's figure-2 setting, one thermal between start
-        and goal), another named scenario, ``"random"`` (a new scenario drawn from
+        and goal), any other name of :func:`soaring_env.scenario.get_scenario` (``"random-<seed>"``,
+        a path to a scenario ``.json`` file), ``"random"`` (a new scenario drawn from
         ``env.np_random`` with :func:`soaring_env.scenario.make_scenario` at every reset), a
-        :class:`~soaring_env.scenario.Scenario`, or its dict/JSON form.
+        :class:`~soaring_env.scenario.Scenario`, or its dict form. A path is stored as a string.
     :param random_scenario: keyword arguments for :func:`~soaring_env.scenario.make_scenario` in
-        ``"random"`` mode (thermal count, strength and wind ranges, bounds, ...).
+        ``"random"`` mode and for ``"random-<seed>"`` names (thermal count, strength and wind
+        ranges, bounds, ...).
     :param duration: primitive duration Ts [s]: one env step flies Ts seconds.
     :param n_points: output points per primitive N (events are detected on these points).
     :param aircraft: aircraft and thrust model (default: Tempest UAS, ``"trim"`` thrust).
@@ -63,7 +65,7 @@ class SoaringEnvConfig:
     :param render_size: (width, height) of ``rgb_array`` frames [px].
     """
 
-    scenario: str | Scenario | Mapping[str, Any] = "paper"
+    scenario: ScenarioSpec = "paper"
     random_scenario: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     duration: float = 30.0
     n_points: int = 30
@@ -84,14 +86,12 @@ class SoaringEnvConfig:
     render_size: tuple[int, int] = (960, 640)
 
     def __post_init__(self) -> None:
-        if isinstance(self.scenario, str):
-            if self.scenario != RANDOM and self.scenario not in SCENARIOS:
-                known = ", ".join(repr(s) for s in [*sorted(SCENARIOS), RANDOM])
-                raise ConfigError(f"scenario={self.scenario!r} is unknown; allowed: {known}, a Scenario or a dict")
-        elif not isinstance(self.scenario, (Scenario, Mapping)):
+        if isinstance(self.scenario, os.PathLike):
+            object.__setattr__(self, "scenario", os.fspath(self.scenario))  # configs are saved as JSON
+        if not isinstance(self.scenario, (str, Scenario, Mapping)):
             raise ConfigError(
                 f"scenario={self.scenario!r} has type {type(self.scenario).__name__}; "
-                "allowed: a scenario name, 'random', a Scenario or a dict"
+                "allowed: a scenario name or path, 'random', a Scenario or a dict"
             )
         if not isinstance(self.random_scenario, Mapping):
             raise ConfigError(f"random_scenario={self.random_scenario!r} must be a dict of make_scenario keywords")
@@ -120,8 +120,8 @@ class SoaringEnvConfig:
         if len(size) != 2 or any(isinstance(s, bool) or not isinstance(s, int) or s < 64 for s in size):
             raise ConfigError(f"render_size={self.render_size!r} must be (width, height) in pixels, each >= 64")
         object.__setattr__(self, "render_size", size)
-        # Fail early on a bad pinned scenario or bad random-scenario keywords.
-        resolve_scenario(self.scenario)
+        # Fail early on an unknown name, a bad file or pinned scenario, or bad random-scenario keywords.
+        resolve_scenario(self.scenario, self.random_scenario)
 
     @classmethod
     def field_names(cls) -> tuple[str, ...]:
@@ -150,17 +150,17 @@ def make_config(config: SoaringEnvConfig | Mapping[str, Any] | None, overrides: 
     return base.replace(**dict(overrides)) if overrides else base
 
 
-def resolve_scenario(spec: ScenarioSpec) -> Scenario | None:
-    """A :class:`Scenario` from a name, dict or Scenario; ``None`` for ``"random"``."""
+def resolve_scenario(spec: ScenarioSpec, random_kwargs: Mapping[str, Any] | None = None) -> Scenario | None:
+    """A :class:`Scenario` from a Scenario, a dict, or a name or path of
+    :func:`~soaring_env.scenario.get_scenario` (``random_kwargs`` for ``"random-<seed>"``);
+    ``None`` for ``"random"``."""
     if isinstance(spec, Scenario):
         return spec
-    if isinstance(spec, str):
-        if spec == RANDOM:
-            return None
-        return get_scenario(spec)
+    if isinstance(spec, (str, os.PathLike)):
+        return None if spec == RANDOM else get_scenario(spec, random_kwargs)
     if isinstance(spec, Mapping):
         return Scenario.from_dict(dict(spec))
-    raise ConfigError(f"scenario={spec!r} is invalid; allowed: a scenario name, 'random', a Scenario or a dict")
+    raise ConfigError(f"scenario={spec!r} is invalid; allowed: a scenario name or path, 'random', a Scenario or a dict")
 
 
 def choose_scenario(
@@ -171,9 +171,10 @@ def choose_scenario(
 ) -> Scenario:
     """The scenario of a new episode.
 
-    ``options["scenario"]`` (a Scenario, name, dict or ``"random"``) wins; else the configured
-    ``fixed`` scenario; else (``"random"`` mode) a scenario drawn from ``rng()`` with
-    :func:`~soaring_env.scenario.make_scenario` and ``random_kwargs``.
+    ``options["scenario"]`` (anything :class:`SoaringEnvConfig` takes as ``scenario``) wins; else
+    the configured ``fixed`` scenario; else (``"random"`` mode) a scenario drawn from ``rng()`` with
+    :func:`~soaring_env.scenario.make_scenario` and ``random_kwargs`` (also the keywords of
+    ``"random-<seed>"`` names).
     """
     spec: Any = None
     if options:
@@ -184,7 +185,7 @@ def choose_scenario(
             raise ConfigError(f"unknown reset option(s) {unknown!r}; allowed: 'scenario'")
         spec = options.get("scenario")
     if spec is not None:
-        pinned = resolve_scenario(spec)  # None for "random"
+        pinned = resolve_scenario(spec, random_kwargs)  # None for "random"
         if pinned is not None:
             return pinned
     elif fixed is not None:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from typing import Any, ClassVar, SupportsFloat
+from typing import TYPE_CHECKING, Any, ClassVar, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
@@ -23,6 +23,9 @@ from soaring_env.model import OUTCOMES, SoaringModel
 from soaring_env.physics.thermals import WindField
 from soaring_env.primitives import N_PRIMITIVES, PrimitiveLibrary
 from soaring_env.scenario import Scenario, get_scenario
+
+if TYPE_CHECKING:  # pragma: no cover - matplotlib is imported only when an env renders
+    from soaring_env.env.rendering import Renderer
 
 #: Progress shaping is counted per km of distance to the goal centre.
 PROGRESS_SCALE = 1000.0
@@ -125,8 +128,9 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
     heading north, 300 m), goal 3 km north at 300 m (radius 150 m), one Allen thermal
     (w* = 2.56 m/s, zi = 1400 m) 1.5 km north, 250 m east. With ``scenario="random"`` every reset
     draws thermal count, positions, strengths, wind, start and goal from ``env.np_random``.
-    ``reset(options={"scenario": s})`` pins a scenario (a Scenario, a name, its dict, or
-    ``"random"``) for that episode.
+    ``reset(options={"scenario": s})`` pins a scenario for that episode: a Scenario, its dict,
+    ``"random"``, or a name of :func:`~soaring_env.scenario.get_scenario` (``"paper"``,
+    ``"random-<seed>"``, a path to a scenario ``.json`` file) -- the same forms as ``scenario=``.
 
     ## Episode End
 
@@ -185,7 +189,7 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
             )
         self.render_mode = render_mode
         self.library = PrimitiveLibrary(duration=cfg.duration, n_points=cfg.n_points)
-        self._fixed_scenario = resolve_scenario(cfg.scenario)
+        self._fixed_scenario = resolve_scenario(cfg.scenario, cfg.random_scenario)
         names, low, high = observation_layout(cfg.observe_thermals, cfg.n_obs_thermals)
         self.observation_names: list[str] = names
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
@@ -220,7 +224,7 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         self._install(self.scenario)
         self._start_episode()
         self._needs_reset = True
-        self._renderer: Any = None
+        self._renderer: Renderer | None = None
 
     # --- public attributes of the contract -------------------------------------------------------
     @property

@@ -9,19 +9,43 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 if TYPE_CHECKING:  # pragma: no cover
-    from soaring_env.env.core import SoaringBaseEnv
+    from soaring_env.scenario import Scenario
 
 _NON_INTERACTIVE = {"agg", "pdf", "ps", "svg", "pgf", "cairo", "template"}
 _OUTCOME_COLOURS = {"flying": "#1f3b73", "goal": "#1a8f3a", "crash": "#c0392b", "out_of_bounds": "#d35400"}
 
 
+class EpisodeView(Protocol):
+    """What the renderer reads of an env (:class:`~soaring_env.env.core.SoaringBaseEnv` has it):
+    a protocol, so that rendering does not import the env module that imports it."""
+
+    @property
+    def continuous(self) -> bool: ...
+    @property
+    def scenario(self) -> Scenario: ...
+    @property
+    def state(self) -> np.ndarray: ...  # [Pn, Pe, chi, h] [m, m, rad, m]
+    @property
+    def time(self) -> float: ...  # [s]
+    @property
+    def steps(self) -> int: ...
+    @property
+    def energy_spent(self) -> float: ...  # [J/kg]
+    @property
+    def outcome(self) -> str: ...
+    @property
+    def path(self) -> np.ndarray: ...  # every flown point (M, 4)
+    @property
+    def history(self) -> Mapping[str, Sequence[float]]: ...  # per-step traces
+
+
 class Renderer:
-    """Draws :class:`~soaring_env.env.core.SoaringBaseEnv` states into one matplotlib figure.
+    """Draws :class:`EpisodeView` states (the envs') into one matplotlib figure.
 
     :param size: (width, height) of the frame [px].
     :param human: show the figure in a window (pyplot) instead of drawing off-screen only.
@@ -58,7 +82,7 @@ class Renderer:
         self.fig.clf()
 
     # --- the updraft field at the aircraft's height ---------------------------------------------------
-    def _heatmap(self, env: SoaringBaseEnv, height: float, t: float) -> tuple[np.ndarray, list[float]]:
+    def _heatmap(self, env: EpisodeView, height: float, t: float) -> tuple[np.ndarray, list[float]]:
         sc = env.scenario
         b = sc.bounds
         key = (id(sc), round(height / 10.0), round(t) if sc.field.drift else 0)
@@ -71,7 +95,7 @@ class Renderer:
         return self._heat, extent
 
     # --- drawing --------------------------------------------------------------------------------------
-    def draw(self, env: SoaringBaseEnv) -> np.ndarray:
+    def draw(self, env: EpisodeView) -> np.ndarray:
         """Draw the current episode and return the frame (uint8, H x W x 3)."""
         fig = self.fig
         fig.clf()
@@ -109,7 +133,7 @@ class Renderer:
         buf = np.asarray(canvas.buffer_rgba())
         return np.ascontiguousarray(buf[..., :3])
 
-    def _top_view(self, ax: Any, env: SoaringBaseEnv, path: np.ndarray, state: np.ndarray, colour: str) -> None:
+    def _top_view(self, ax: Any, env: EpisodeView, path: np.ndarray, state: np.ndarray, colour: str) -> None:
         from matplotlib.patches import Circle, FancyArrow, Rectangle
 
         sc = env.scenario
@@ -186,7 +210,7 @@ class Renderer:
         ax.set_title("top view", fontsize=9)
 
     def _zoom_inset(
-        self, ax: Any, env: SoaringBaseEnv, path: np.ndarray, state: np.ndarray, colour: str, extent: list[float]
+        self, ax: Any, env: EpisodeView, path: np.ndarray, state: np.ndarray, colour: str, extent: list[float]
     ) -> None:
         """A 700 m x 700 m close-up of the updraft around the aircraft, in the emptiest corner."""
         from matplotlib.patches import Rectangle
@@ -233,7 +257,7 @@ class Renderer:
             )
         )
 
-    def _view_3d(self, ax: Any, env: SoaringBaseEnv, path: np.ndarray, colour: str) -> None:
+    def _view_3d(self, ax: Any, env: EpisodeView, path: np.ndarray, colour: str) -> None:
         sc = env.scenario
         b = sc.bounds
         g = sc.goal
@@ -284,7 +308,7 @@ class Renderer:
         ax.view_init(elev=22, azim=-125)
         ax.set_title(f"3-D view (height x{exaggeration:.0f}; shadow dashed)", fontsize=9)
 
-    def _height_trace(self, ax: Any, env: SoaringBaseEnv, hist: Mapping[str, Sequence[float]]) -> None:
+    def _height_trace(self, ax: Any, env: EpisodeView, hist: Mapping[str, Sequence[float]]) -> None:
         t = np.asarray(hist["time"]) / 60.0
         ax.plot(t, hist["height"], marker="o", ms=3, color="#1f3b73", label="height")
         g = env.scenario.goal

@@ -21,7 +21,7 @@ import numpy as np
 from numba import njit
 
 from soaring_env._jit import FASTMATH as _FM
-from soaring_env._validation import ConfigError, check_choice, check_positive, check_range, check_type
+from soaring_env._validation import ConfigError, broadcast_flat, check_choice, check_positive, check_range, check_type
 from soaring_env.physics.atmosphere import MAX_HEIGHT, G, _density
 
 THRUST_MODELS = ("trim", "paper")
@@ -125,13 +125,13 @@ class Aircraft:
         the whole height range when it is zero at both ends; the angle is found by bisection
         (60 halvings: to within 1e-17 rad, then the side that needs no thrust is kept).
         """
-        v, w = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (airspeed, chi_dot)))
+        shape, (v, w) = broadcast_flat(airspeed, chi_dot)
         if not (np.all(np.isfinite(v) & (v > 0.0)) and np.all(np.isfinite(w))):
             raise ConfigError("airspeed and chi_dot must be finite and airspeed > 0 m/s")
         h = check_range("height_max", height_max, 0.0, MAX_HEIGHT, high_open=True)
         out = np.empty(v.shape)
-        _glide_angles(v.ravel(), w.ravel(), h, self.packed(), out.reshape(-1))
-        return out
+        _glide_angles(v, w, h, self.packed(), out)
+        return out.reshape(shape)
 
     def fuel_power(self, airspeed, gamma, bank, height) -> np.ndarray:
         """Specific fuel power ``T v_a / (m eta_ec eta_p)`` [W/kg] = [J/(kg s)]."""

@@ -15,7 +15,15 @@ import numpy as np
 from numba import njit
 
 from soaring_env._jit import FASTMATH as _FM
-from soaring_env._validation import ConfigError, check_bool, check_choice, check_finite, check_positive, check_type
+from soaring_env._validation import (
+    ConfigError,
+    broadcast_flat,
+    check_bool,
+    check_choice,
+    check_finite,
+    check_positive,
+    check_type,
+)
 from soaring_env.physics.atmosphere import MAX_HEIGHT
 
 THERMAL_MODELS = ("allen", "gaussian")
@@ -143,15 +151,15 @@ class WindField:
 
         :param north: [m]; :param east: [m]; :param height: [m]; :param t: time [s] (drift only).
         """
-        arrays = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (north, east, height, t)))
+        shape, arrays = broadcast_flat(north, east, height, t)
         for name, a in zip(("north", "east", "height", "t"), arrays, strict=True):
             if not np.all(np.isfinite(a)):
                 raise ConfigError(f"{name} contains non-finite values; all points must be finite")
-        n, e, h, tt = (np.ascontiguousarray(a).ravel() for a in arrays)
+        n, e, h, tt = arrays
         out = np.empty(n.shape)
         dvx, dvy = (self.wind_north, self.wind_east) if self.drift else (0.0, 0.0)
         _updraft_many(n, e, h, tt, self._packed, self.model_code, self.zi, dvx, dvy, out)
-        return out.reshape(arrays[0].shape)
+        return out.reshape(shape)
 
     def allen_profile(self, height: float, strength: float = 1.0) -> dict[str, float]:
         """Allen's radial scales at one height: r2, r1 [m], wbar, w_peak [m/s] (for w* = strength)."""
