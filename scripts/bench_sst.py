@@ -12,6 +12,7 @@ plots the anytime regret curves (median over the seeds) to ``--figure``.
     python scripts/bench_sst.py                    # 3 seeds x 20 s per row (about 15 minutes)
     python scripts/bench_sst.py --time 5 --seeds 2 # a quick look
     python scripts/bench_sst.py --update --variants soaring   # rerun one variant, keep the other rows
+    python scripts/bench_sst.py --rescore          # new reference: regrets, table and figure, no runs
 
 Targets: >= 40,000 iterations/s with the primitive sampler on one core (the paper's planner,
 batched); a solution in every run within 20 s for both samplers; a first solution within 50 ms.
@@ -187,6 +188,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-ompl", action="store_true", help="leave out OMPL's planners")
     ap.add_argument("--replot", action="store_true", help="only redraw --figure from the rows in --out")
     ap.add_argument(
+        "--rescore",
+        action="store_true",
+        help="run nothing: recompute the regrets, the table and the figure of --out against --reference",
+    )
+    ap.add_argument(
         "--update",
         action="store_true",
         help="rerun only the given --samplers x --variants and keep the other rows of --out (same --time, --seeds)",
@@ -234,13 +240,19 @@ def main(argv: list[str] | None = None) -> int:
     )
     rows: list[dict[str, Any]] = []
     kept: list[dict[str, Any]] = []
-    if args.update:
+    if args.update or args.rescore:
         if not args.out.is_file():
-            ap.error(f"--update needs the results file {args.out}")
+            ap.error(f"--update / --rescore need the results file {args.out}")
         saved = json.loads(args.out.read_text())
-        if saved["time"] != args.time or saved["seeds"] != args.seeds:
+        if args.rescore:  # nothing to run: every saved row is kept
+            args.time, args.seeds, args.samplers, args.variants = saved["time"], saved["seeds"], [], []
+        elif saved["time"] != args.time or saved["seeds"] != args.seeds:
             ap.error(f"--update: {args.out} was run with --time {saved['time']:g} --seeds {saved['seeds']}")
         kept = [r for r in saved["rows"] if not (r["sampler"] in args.samplers and r["variant"] in args.variants)]
+        for r in kept:  # against the reference of this run
+            for k in ("1", "5", "T"):
+                r[f"regret_{k}"] = regret(r[f"cost_{k}"], r["sampler"])
+            r["time_to_near_best"] = near_best_time(r)
     for sampler in args.samplers:
         for variant in args.variants:
             for seed in range(args.seeds):

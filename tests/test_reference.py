@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -24,7 +25,7 @@ from baselines.reference import (
     without_thermals,
 )
 from baselines.sst.core import EDGE_GOAL, EDGE_VALID
-from baselines.sst.soaring import S_H, SoaringProblem
+from baselines.sst.soaring import S_H, SAMPLERS, SoaringProblem
 from soaring_env._validation import ConfigError
 from soaring_env.model import GOAL, SoaringModel
 from soaring_env.physics.atmosphere import G
@@ -269,6 +270,24 @@ def test_reference_file_round_trip(tmp_path, tiny: SoaringModel) -> None:
         load_reference(p)
 
 
+def test_planner_seed_makes_the_primitive_reference_no_worse_than_the_planner(tiny: SoaringModel) -> None:
+    """With ``planner_iterations`` the primitive search keeps the soaring SST's deterministic plan in
+    its beam: the reference is never worse than that plan (nor than the unseeded search); the
+    continuous search runs, and records, no planner seed."""
+    from baselines.sst import plan_soaring
+
+    cfg = ReferenceConfig(beam_width=5, start_width=5, max_edges=6)
+    plain = compute_reference(TINY, SAMPLERS, cfg)
+    seeded = compute_reference(TINY, SAMPLERS, dataclasses.replace(cfg, planner_iterations=3000))
+    sst = plan_soaring(tiny, "primitive", max_iterations=3000, seed=0)
+    p = seeded.samplers["primitive"]
+    assert sst.plan.solved and p.best_cost <= sst.plan.cost + 1e-9
+    assert p.best_cost <= plain.samplers["primitive"].best_cost + 1e-9
+    assert p.settings["planner_iterations"] == 3000
+    assert seeded.samplers["continuous"].settings["planner_iterations"] == 0
+    assert seeded.samplers["continuous"].best_cost == plain.samplers["continuous"].best_cost
+
+
 @pytest.mark.parametrize(
     ("kwargs", "field"),
     [
@@ -286,6 +305,8 @@ def test_reference_file_round_trip(tmp_path, tiny: SoaringModel) -> None:
         ({"primitives": (1, -2)}, "primitives"),
         ({"region_quota": -1}, "region_quota"),
         ({"start_width": 0}, "start_width"),
+        ({"planner_iterations": -1}, "planner_iterations"),
+        ({"planner_iterations": 2.5}, "planner_iterations"),
     ],
 )
 def test_bad_settings_name_the_field(kwargs: dict, field: str) -> None:

@@ -111,6 +111,12 @@ class ReferenceConfig:
         model's bank limit); for tests and ablations.
     :param region_size: side of the squares of the beam's diversity quota [m].
     :param region_quota: nodes per square taken first into the beam (0: no quota).
+    :param planner_iterations: for the primitives (:func:`~baselines.reference.compute_reference`;
+        :func:`search` takes its seeds as arguments): random expansions of a deterministic run of
+        the soaring SST (seed 0, :func:`baselines.sst.plan_soaring`) whose plan seeds the search
+        beside the direct flight's -- kept in the beam at every depth, so the reference is never
+        worse than that plan; 0: no planner seed. (The continuous planner's controls lie outside the
+        continuous control set: there it could not seed the beam, and it is not run.)
     """
 
     beam_width: int = 2000
@@ -125,10 +131,12 @@ class ReferenceConfig:
     start_width: int = 250
     region_size: float = 200.0
     region_quota: int = 8
+    planner_iterations: int = 0
 
     def __post_init__(self) -> None:
         check_positive("region_size", self.region_size)
         check_int("region_quota", self.region_quota, 0)
+        check_int("planner_iterations", self.planner_iterations, 0)
         check_int("beam_width", self.beam_width, 1)
         if self.beam_width > MAX_BEAM_WIDTH:
             raise ConfigError(f"beam_width={self.beam_width!r} is too large; allowed: 1..{MAX_BEAM_WIDTH}")

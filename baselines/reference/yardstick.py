@@ -24,8 +24,9 @@ from typing import Any
 
 import numpy as np
 
-from baselines.reference.beam import ReferenceConfig, SearchResult, search
+from baselines.reference.beam import ReferenceConfig, search
 from baselines.reference.bounds import MIN_GAP, lower_bound, regret, without_thermals
+from baselines.sst.plan import Plan, plan_soaring
 from baselines.sst.soaring import SAMPLERS
 from soaring_env._validation import ConfigError, check_choice
 from soaring_env.model import SoaringModel
@@ -154,6 +155,7 @@ def compute_reference(
     out: dict[str, SamplerReference] = {}
     for sampler in samplers:
         check_choice("sampler", sampler, SAMPLERS)
+        cfg_s = sampler_config(cfg, sampler)
         t0 = time.perf_counter()
 
         def cb(stage: str, sampler: str = sampler) -> Callable[[int, int], None] | None:
@@ -161,26 +163,39 @@ def compute_reference(
                 return None
             return lambda d, n: progress(f"{sampler}/{stage}", d, n)
 
-        direct = search(direct_model, sampler, cfg, progress=cb("direct"))
-        seed = [_core_controls(direct)] if direct.plan.solved else []
-        best = search(model, sampler, cfg, seed_controls=seed, progress=cb("thermals"))
+        direct = search(direct_model, sampler, cfg_s, progress=cb("direct"))
+        seed = [_core_controls(direct.plan)] if direct.plan.solved else []
+        n_sst = 0
+        if cfg_s.planner_iterations:
+            sst = plan_soaring(model, sampler, max_iterations=cfg_s.planner_iterations, seed=0)
+            n_sst = sst.stats.iterations
+            if sst.plan.solved:
+                seed.append(_core_controls(sst.plan))
+        best = search(model, sampler, cfg_s, seed_controls=seed, progress=cb("thermals"))
         out[sampler] = SamplerReference(
             best_cost=best.cost,
             direct_cost=direct.cost,
             actions=best.plan.to_dict()["actions"],
             direct_actions=direct.plan.to_dict()["actions"],
             flight_time=best.plan.flight_time,
-            settings=cfg.to_dict(),
-            rollouts=direct.rollouts + best.rollouts,
+            settings=cfg_s.to_dict(),
+            rollouts=direct.rollouts + best.rollouts + n_sst,
             seconds=time.perf_counter() - t0,
         )
     return ScenarioReference(scenario=scenario, lower_bound=lower_bound(model), samplers=out)
 
 
-def _core_controls(res: SearchResult) -> np.ndarray:
+def sampler_config(cfg: ReferenceConfig, sampler: str) -> ReferenceConfig:
+    """The settings the search of one action set runs with (and its file records): the planner
+    seed only for the primitives -- the continuous planner's controls lie outside the continuous
+    control set, so there it could not seed the beam."""
+    return cfg if sampler == "primitive" else dataclasses.replace(cfg, planner_iterations=0)
+
+
+def _core_controls(plan: Plan) -> np.ndarray:
     """The plan's env actions as rows of the search's control vectors."""
-    acts = res.plan.actions
-    if res.plan.kind == "primitive":
+    acts = plan.actions
+    if plan.kind == "primitive":
         return np.array([[float(a)] for a in acts])
     return np.array([np.asarray(a, np.float64) for a in acts])
 
