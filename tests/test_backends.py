@@ -42,11 +42,8 @@ TINY_REF = ReferenceConfig(beam_width=5, start_width=5, max_edges=2)
 
 
 def _script(name: str) -> ModuleType:
-    spec = importlib.util.spec_from_file_location(name, ROOT / "scripts" / f"{name}.py")
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    """The command-line module behind ``scripts/<name>.py``."""
+    return importlib.import_module(f"baselines.cli.{name}")
 
 
 def _file_without_timings(out: Path) -> dict[str, Any]:

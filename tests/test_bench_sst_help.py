@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import importlib.util
-from pathlib import Path
 
 import pytest
 
@@ -11,11 +10,7 @@ from baselines.sst.soaring import SST_CONFIGS
 
 
 def test_bench_sst_help_shows_the_true_batch_sizes(capsys: pytest.CaptureFixture[str]) -> None:
-    path = Path(__file__).resolve().parents[1] / "scripts" / "bench_sst.py"
-    spec = importlib.util.spec_from_file_location("bench_sst", path)
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = importlib.import_module("baselines.cli.bench_sst")
     with pytest.raises(SystemExit) as exc:
         mod.main(["--help"])
     assert exc.value.code == 0

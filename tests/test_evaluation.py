@@ -57,11 +57,8 @@ def test_unknown_scenario_is_refused_with_the_known_names() -> None:
 
 
 def _script(name: str) -> Any:
-    spec = importlib.util.spec_from_file_location(name, Path(__file__).resolve().parents[1] / "scripts" / f"{name}.py")
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    """The command-line module behind ``scripts/<name>.py``."""
+    return importlib.import_module(f"baselines.cli.{name}")
 
 
 def test_evaluate_script_refuses_unknown_names(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import ast
 import graphlib
+import importlib
 from pathlib import Path
 
 import pytest
@@ -29,6 +30,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("soaring_env.model",),
     ("soaring_env.env", "soaring_env"),
     ("baselines",),
+    ("baselines.cli",),  # the command-line programs: nothing imports them
 )
 
 
@@ -191,3 +193,19 @@ def test_wheel_ships_py_typed_for_both_packages(tmp_path: Path) -> None:
     names = zipfile.ZipFile(wheel).namelist()
     assert {f"{pkg}/py.typed" for pkg in PACKAGES} <= set(names)
     assert {n.split("/")[0] for n in names} == {*PACKAGES, f"soaring_env-{wheel.name.split('-')[1]}.dist-info"}
+
+
+def test_console_commands_and_script_shims_run_the_cli_modules() -> None:
+    """Every ``[project.scripts]`` command names a ``main`` of :mod:`baselines.cli`, and every
+    ``scripts/<name>.py`` is a shim for the module of the same name."""
+    tomllib = pytest.importorskip("tomllib")  # Python >= 3.11
+    root = Path(__file__).resolve().parents[1]
+    commands = tomllib.loads((root / "pyproject.toml").read_text())["project"]["scripts"]
+    shims = sorted(p.stem for p in (root / "scripts").glob("*.py"))
+    assert sorted(v.split(":")[0].rsplit(".", 1)[1] for v in commands.values()) == shims
+    for name, target in commands.items():
+        module, func = target.split(":")
+        assert name == "soaring-" + module.rsplit(".", 1)[1].replace("_", "-")
+        assert callable(getattr(importlib.import_module(module), func))
+    for stem in shims:
+        assert f"from baselines.cli.{stem} import main" in (root / "scripts" / f"{stem}.py").read_text()

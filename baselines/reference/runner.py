@@ -48,8 +48,7 @@ def _is_current(path: Path, scenario: Scenario, samplers: Sequence[str], cfg: Re
     ref = load_reference(path)
     # settings read back through ReferenceConfig: a file from before a new field holds its default
     return ref.scenario == scenario and all(
-        s in ref.samplers
-        and ReferenceConfig(**ref.samplers[s].settings).to_dict() == sampler_config(cfg, s).to_dict()
+        s in ref.samplers and ReferenceConfig(**ref.samplers[s].settings).to_dict() == sampler_config(cfg, s).to_dict()
         for s in samplers
     )
 

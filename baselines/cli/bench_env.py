@@ -1,0 +1,156 @@
+"""Environment throughput: soaring envs against gymnasium's CartPole-v1, measured in one run.
+
+Prints env steps per second for ``soaring/Soaring-v0``, ``soaring/SoaringContinuous-v0``,
+``CartPole-v1`` (the reference), gymnasium's sync vector env, and the natively batched vector env
+(``gym.make_vec`` through ``vector_entry_point``) at 1024 envs, then the targets with PASS/FAIL:
+
+* a single-env step takes at most 3x CartPole's step time (both through ``gym.make``, wrappers
+  included, random actions, reset when an episode ends);
+* the native batched env makes at least 500,000 env-steps per second on one core.
+
+The process is pinned to one core (``os.sched_setaffinity`` where available) and numba to one
+thread, so the numbers are single-core numbers. Each measurement is the best of ``--repeats``.
+
+Usage: ``python scripts/bench_env.py [--seconds 1.0] [--repeats 3] [--num-envs 1024] [--strict]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from collections.abc import Callable
+
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # before numba is imported
+
+import gymnasium as gym
+import numpy as np
+
+import soaring_env  # noqa: F401  (registers the ids)
+from baselines._runs import check_cli_args
+
+SINGLE_TARGET_RATIO = 3.0
+NATIVE_TARGET = 500_000.0
+
+
+def pin_one_core() -> str:
+    """Pin this process to one CPU core if the OS allows it; return a description."""
+    if hasattr(os, "sched_setaffinity"):
+        core = min(os.sched_getaffinity(0))
+        os.sched_setaffinity(0, {core})
+        return f"pinned to core {core}"
+    return "not pinned (os.sched_setaffinity unavailable)"
+
+
+def best_rate(run: Callable[[float], tuple[int, float]], seconds: float, repeats: int) -> float:
+    """Best of ``repeats`` runs of ``run(seconds) -> (steps, elapsed)``, in steps per second."""
+    run(min(0.2, seconds))  # warm-up: numba cache loading, first-call checks
+    return max(n / dt for n, dt in (run(seconds) for _ in range(repeats)))
+
+
+def single_env_runner(env_id: str, seed: int = 0, **kwargs) -> Callable[[float], tuple[int, float]]:
+    env = gym.make(env_id, **kwargs)
+    env.reset(seed=seed)
+    env.action_space.seed(seed)
+    actions = [env.action_space.sample() for _ in range(4096)]
+
+    def run(seconds: float) -> tuple[int, float]:
+        n = 0
+        t0 = time.perf_counter()
+        deadline = t0 + seconds
+        step, reset = env.step, env.reset
+        while True:
+            for a in actions:
+                _, _, terminated, truncated, _ = step(a)
+                if terminated or truncated:
+                    reset()
+            n += len(actions)
+            now = time.perf_counter()
+            if now >= deadline:
+                return n, now - t0
+
+    return run
+
+
+def vector_env_runner(env_id: str, num_envs: int, mode: str | None, **kwargs) -> Callable[[float], tuple[int, float]]:
+    env = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode=mode, **kwargs)
+    env.reset(seed=0)
+    env.action_space.seed(0)
+    actions = [env.action_space.sample() for _ in range(64)]
+
+    def run(seconds: float) -> tuple[int, float]:
+        n = 0
+        t0 = time.perf_counter()
+        deadline = t0 + seconds
+        while True:
+            for a in actions:
+                env.step(a)
+            n += len(actions) * num_envs
+            now = time.perf_counter()
+            if now >= deadline:
+                return n, now - t0
+
+    return run
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--seconds", type=float, default=1.0, help="duration of one measurement [s]")
+    p.add_argument("--repeats", type=int, default=3, help="measurements per row; the best is reported")
+    p.add_argument("--num-envs", type=int, default=1024, help="envs of the native batched env")
+    p.add_argument("--sync-envs", type=int, default=16, help="envs of gymnasium's sync vector env")
+    p.add_argument("--strict", action="store_true", help="exit with status 1 if a target fails")
+    args = p.parse_args(argv)
+    check_cli_args(p, args, counts=("repeats", "num_envs", "sync_envs"), positive=("seconds",))
+
+    pinning = pin_one_core()
+    print(f"soaring-env benchmark | {pinning} | NUMBA_NUM_THREADS={os.environ['NUMBA_NUM_THREADS']}")
+    print(f"python {sys.version.split()[0]}, gymnasium {gym.__version__}, numpy {np.__version__}")
+    print(f"best of {args.repeats} x {args.seconds:g} s, random actions, default 'paper' scenario unless noted\n")
+
+    rows: list[tuple[str, float]] = []
+
+    def measure(name: str, runner: Callable[[float], tuple[int, float]]) -> float:
+        rate = best_rate(runner, args.seconds, args.repeats)
+        rows.append((name, rate))
+        print(f"  {name:<58s} {rate:>14,.0f} steps/s  {1e6 / rate:>9.3f} us/step", flush=True)
+        return rate
+
+    cart = measure("CartPole-v1 (gym.make, reference)", single_env_runner("CartPole-v1"))
+    disc = measure("soaring/Soaring-v0 (gym.make)", single_env_runner("soaring/Soaring-v0"))
+    cont = measure("soaring/SoaringContinuous-v0 (gym.make)", single_env_runner("soaring/SoaringContinuous-v0"))
+    measure(
+        "soaring/Soaring-v0 random scenarios (gym.make)",
+        single_env_runner("soaring/Soaring-v0", scenario="random"),
+    )
+    measure(
+        f"Soaring-v0 sync vector env, {args.sync_envs} envs",
+        vector_env_runner("soaring/Soaring-v0", args.sync_envs, "sync"),
+    )
+    native = measure(
+        f"Soaring-v0 native batched env, {args.num_envs} envs",
+        vector_env_runner("soaring/Soaring-v0", args.num_envs, None),
+    )
+    measure(
+        f"SoaringContinuous-v0 native batched env, {args.num_envs} envs",
+        vector_env_runner("soaring/SoaringContinuous-v0", args.num_envs, None),
+    )
+    measure(
+        f"Soaring-v0 native batched env, {args.num_envs} envs, random scen.",
+        vector_env_runner("soaring/Soaring-v0", args.num_envs, None, scenario="random"),
+    )
+
+    print("\nratios (step time relative to CartPole-v1):")
+    results = []
+    for name, rate in (("Soaring-v0", disc), ("SoaringContinuous-v0", cont)):
+        ratio = cart / rate
+        ok = ratio <= SINGLE_TARGET_RATIO
+        results.append(ok)
+        print(f"  {name:<22s} {ratio:5.2f}x CartPole   target <= {SINGLE_TARGET_RATIO:g}x   {'PASS' if ok else 'FAIL'}")
+    ok = native >= NATIVE_TARGET
+    results.append(ok)
+    verdict = "PASS" if ok else "FAIL"
+    print(f"  native batched env     {native:,.0f} env-steps/s   target >= {NATIVE_TARGET:,.0f}   {verdict}")
+    print(f"  native speed-up over the single Soaring-v0 env: {native / disc:.1f}x")
+    return 0 if (all(results) or not args.strict) else 1

@@ -1,0 +1,149 @@
+"""The optimality yardstick: the reference search on the paper scenario and every held-out
+evaluation scenario -- lower bound, direct-flight cost and best plan per action set.
+
+    python scripts/reference.py                      # paper + 20 held-out scenarios, both action sets
+    python scripts/reference.py --scenarios paper    # one scenario
+    python scripts/reference.py --convergence        # paper: best cost as the beam width doubles
+    python scripts/reference.py --backend ray --address auto   # the scenarios as tasks on a Ray cluster
+    python scripts/reference.py --samplers primitive           # one action set (the file keeps the other)
+
+The primitive search is seeded with the plan of a deterministic soaring-SST run
+(``--planner-iterations``, seed 0) besides the direct flight's, so it is never worse than that plan:
+"best known" includes what the planner itself found.
+
+Writes one JSON per scenario to ``results/reference/<name>.json`` (atomically, as soon as it is
+done; a rerun resumes and recomputes only files whose settings differ), ``table.md`` and
+``paper.png`` (the paper scenario's best and direct plans, replayed through ``env.step``);
+``--convergence`` writes ``convergence/convergence.md`` and ``convergence.json``. Every regret the project
+reports (``scripts/evaluate.py``, ``scripts/reproduce_paper.py``, ``scripts/bench_sst.py``) reads
+these files.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+from baselines._runs import add_backend_args, check_cli_args, cli_workers
+from baselines.evaluation import heldout_names, resolve_scenario
+from baselines.reference import ReferenceConfig, compute_reference
+from baselines.reference.runner import reference_table, run_references
+from baselines.sst.soaring import SAMPLERS
+from soaring_env._validation import ConfigError
+from soaring_env.scenario import atomic_write_text
+
+#: Expansions of the soaring SST whose primitive plan seeds the reference (the reference is then
+#: never worse than that deterministic plan; see ReferenceConfig.planner_iterations).
+PLANNER_ITERATIONS = 300_000
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point; returns the exit status."""
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--scenarios", nargs="+", default=None, help="scenario names (default: paper + --heldout)")
+    p.add_argument("--heldout", type=int, default=20, help="held-out scenarios random-10000 ... (default 20)")
+    p.add_argument("--samplers", nargs="+", choices=SAMPLERS, default=list(SAMPLERS), help="action sets")
+    p.add_argument("--beam-width", type=int, default=ReferenceConfig.beam_width, help="the accuracy knob")
+    p.add_argument(
+        "--planner-iterations",
+        type=int,
+        default=PLANNER_ITERATIONS,
+        help=f"primitives: seed the search with the soaring SST's plan after this many expansions "
+        f"(seed 0; 0: none; default {PLANNER_ITERATIONS:,})",
+    )
+    add_backend_args(p, "one per CPU core")
+    p.add_argument("--out", type=Path, default=Path("results/reference"), help="output directory")
+    p.add_argument("--fresh", action="store_true", help="recompute finished scenarios too")
+    p.add_argument("--convergence", action="store_true", help="paper scenario at 1/2, 1 and 2 x the beam width")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--no-figures", action="store_true", help="skip the PNG of the paper scenario's plans")
+    args = p.parse_args(argv)
+    check_cli_args(p, args, counts=("heldout", "beam_width", "workers"), dirs=("out",))
+    if args.planner_iterations < 0:
+        p.error(f"--planner-iterations={args.planner_iterations} must be >= 0")
+    try:
+        cfg = ReferenceConfig(beam_width=args.beam_width, planner_iterations=args.planner_iterations)
+        if args.convergence:
+            return _convergence(cfg, args.samplers, args.out)
+        names = args.scenarios if args.scenarios is not None else ["paper", *heldout_names(args.heldout)]
+        scenarios = [resolve_scenario(n) for n in names]
+        t0 = time.perf_counter()
+        workers = cli_workers(args, os.cpu_count() or 1)
+        print(
+            f"reference search: {len(scenarios)} scenarios x {', '.join(args.samplers)}, beam width "
+            f"{cfg.beam_width}, {'all the cluster' if workers is None else workers} workers ({args.backend}) "
+            f"-> {args.out}",
+            flush=True,
+        )
+        refs = run_references(
+            scenarios,
+            args.out,
+            samplers=args.samplers,
+            config=cfg,
+            workers=workers,
+            fresh=args.fresh,
+            progress=not args.no_progress,
+            backend=args.backend,
+            address=args.address,
+        )
+    except ConfigError as exc:
+        p.error(str(exc))
+    table = reference_table(refs, args.samplers)
+    atomic_write_text(args.out / "table.md", table + "\n")
+    if not args.no_figures and "paper" in refs:
+        from baselines.reference.plots import plot_reference
+
+        print(f"figure: {plot_reference(refs['paper'], args.out / 'paper.png')}")
+    print(table)
+    print(f"\n{len(refs)} scenarios in {time.perf_counter() - t0:.0f} s; table: {args.out / 'table.md'}")
+    return 0
+
+
+def _convergence(cfg: ReferenceConfig, samplers: list[str], out: Path) -> int:
+    """The paper scenario at beam widths W/2, W, 2W: best cost, its change as a share of
+    (direct - lower bound), and the time (one process, one core)."""
+    sc = resolve_scenario("paper")
+    rows: list[dict[str, Any]] = []
+    for k in (0.5, 1, 2):
+        c = ReferenceConfig(**{**cfg.to_dict(), "beam_width": max(1, int(cfg.beam_width * k))})
+        print(f"beam width {c.beam_width} ...", flush=True)
+        ref = compute_reference(sc, samplers, c)
+        for s in samplers:
+            sr = ref.samplers[s]
+            rows.append(
+                {
+                    "sampler": s,
+                    "beam_width": c.beam_width,
+                    "best_cost": sr.best_cost,
+                    "direct_cost": sr.direct_cost,
+                    "lower_bound": ref.lower_bound,
+                    "seconds": sr.seconds,
+                    "rollouts": sr.rollouts,
+                }
+            )
+            print(f"  {s}: best {sr.best_cost:,.0f} J/kg, direct {sr.direct_cost:,.0f}, {sr.seconds:.0f} s", flush=True)
+    lines = [
+        "| action set | beam width | best [J/kg] | change vs half the width [% of direct - bound] | direct [J/kg] "
+        "| lower bound [J/kg] | rollouts | time [s] |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for s in samplers:
+        prev = None
+        for r in (x for x in rows if x["sampler"] == s):
+            span = r["direct_cost"] - r["lower_bound"]
+            ch = "—" if prev is None else f"{100 * (r['best_cost'] - prev) / span:+.1f}"
+            lines.append(
+                f"| {s} | {r['beam_width']} | {r['best_cost']:,.0f} | {ch} | {r['direct_cost']:,.0f} "
+                f"| {r['lower_bound']:,.0f} | {r['rollouts']:,} | {r['seconds']:.0f} |"
+            )
+            prev = r["best_cost"]
+    table = "\n".join(lines)
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out / "convergence" / "convergence.md", table + "\n")
+    atomic_write_text(out / "convergence" / "convergence.json", json.dumps(rows, indent=1))
+    print(table)
+    return 0
