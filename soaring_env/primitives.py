@@ -33,7 +33,14 @@ from soaring_env._validation import (
 )
 from soaring_env.physics.aircraft import _AC_ETA, _AC_MASS, _AC_MODEL, Aircraft, _thrust_at, _thrust_coeffs
 from soaring_env.physics.atmosphere import LAPSE, MAX_HEIGHT, T0, G, _density, _density_near
-from soaring_env.physics.thermals import _GAUSSIAN, GAUSSIAN_CUTOFF, WindField, updraft_at, within_allen_reach
+from soaring_env.physics.thermals import (
+    _GAUSSIAN,
+    GAUSSIAN_CUTOFF,
+    PACKED_COLUMNS,
+    WindField,
+    updraft_at,
+    within_allen_reach,
+)
 
 FAMILIES = ("straight", "curve", "spiral", "spline")
 STRAIGHT, CURVE, SPIRAL, SPLINE = range(4)
@@ -384,7 +391,7 @@ def pack_fields(fields: Sequence[WindField]) -> tuple[np.ndarray, np.ndarray, np
     if len(fields) == 0:
         raise ConfigError("pack_fields needs at least one WindField")
     n = np.array([len(f.thermals) for f in fields], dtype=np.int64)
-    thermals = np.zeros((len(fields), max(1, int(n.max())), 4))
+    thermals = np.zeros((len(fields), max(1, int(n.max())), PACKED_COLUMNS))
     for i, f in enumerate(fields):
         thermals[i, : n[i]] = f.packed
     return thermals, n, np.stack([field_params(f) for f in fields])

@@ -41,6 +41,7 @@ from soaring_env.env.config import SoaringEnvConfig, choose_scenario
 from soaring_env.env.core import SoaringBaseEnv, SoaringContinuousEnv, SoaringEnv
 from soaring_env.env.observation import N_PARAMS, P_WN, observe_batch, scenario_params
 from soaring_env.model import OUTCOMES, SoaringModel
+from soaring_env.physics.thermals import PACKED_COLUMNS
 from soaring_env.primitives import N_PRIMITIVES
 from soaring_env.scenario import Scenario
 
@@ -124,7 +125,7 @@ class _SoaringVectorBase(VectorEnv):
         self._dist = np.zeros(b)
         self._prev_done = np.zeros(b, dtype=np.bool_)
         self._prm = np.zeros((b, N_PARAMS))
-        self._th = np.zeros((b, 1, 4))
+        self._th = np.zeros((b, 1, PACKED_COLUMNS))
         self._nth = np.zeros(b, dtype=np.int64)
         #: per-env field scalars for the kernel (rows of field_params); env i's field is row i
         self._fpar = np.zeros((b, N_PARAMS - P_WN))
@@ -190,7 +191,7 @@ class _SoaringVectorBase(VectorEnv):
             groups = [(self.scenarios[v[0]], np.array(v)) for v in by_sc.values()]
         need = max(len(sc.field.thermals) for sc in chosen)
         if need > self._th.shape[1]:
-            th = np.zeros((self.num_envs, need, 4))
+            th = np.zeros((self.num_envs, need, PACKED_COLUMNS))
             th[:, : self._th.shape[1]] = self._th
             self._th = th
         for sc, idx in groups:

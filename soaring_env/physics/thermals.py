@@ -45,6 +45,9 @@ ALLEN_SHAPE = np.array(
 ALLEN_R2_MAX_PER_ZI = 0.102 * 0.75
 #: Gaussian thermals are treated as exactly zero beyond 6 R (exp(-36) < 3e-16 of the peak).
 GAUSSIAN_CUTOFF = 6.0
+#: Columns of :attr:`WindField.packed` (the kernels' thermal rows): north, east, strength,
+#: radius-or-influence. Code that allocates thermal tables uses this width.
+PACKED_COLUMNS = 4
 
 
 @dataclass(frozen=True)
@@ -110,7 +113,7 @@ class WindField:
         object.__setattr__(self, "drift", check_bool("drift", self.drift))
         allen = self.model == "allen"
         rows = [[t.north, t.east, t.strength, self._influence(t) if allen else t.radius] for t in self.thermals]
-        packed = np.array(rows, dtype=np.float64).reshape(-1, 4)
+        packed = np.array(rows, dtype=np.float64).reshape(-1, PACKED_COLUMNS)
         packed.setflags(write=False)
         object.__setattr__(self, "_packed", packed)
         w = packed[:, 2]
