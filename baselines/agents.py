@@ -159,7 +159,7 @@ class HeuristicAgent:
         lib = model.library
         pn, pe, chi, h = (float(v) for v in np.asarray(base.state, dtype=np.float64)[:4])
         t = float(getattr(base, "time", 0.0))
-        goal = sc.goal
+        goal = sc.require_goal()
         field = sc.field
         ts = self._step_duration()
         v_slow, v_fast = float(lib.table[:, COL_AIRSPEED].min()), float(lib.table[:, COL_AIRSPEED].max())

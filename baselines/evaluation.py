@@ -680,7 +680,8 @@ def plot_trajectories(
         sc = Scenario.from_dict(results["meta"]["scenarios"][sc_name])
         runs = [e for e in eps if e["scenario"] == sc_name and e["seed"] == seed]
         pts = np.array(
-            [p for e in runs for p in e["path"]] + [[sc.start[0], sc.start[1], sc.start[3]], list(sc.goal.centre)]
+            [p for e in runs for p in e["path"]]
+            + [[sc.start[0], sc.start[1], sc.start[3]], list(sc.require_goal().centre)]
         )
         lo = pts[:, :2].min(axis=0) - 400.0
         hi = pts[:, :2].max(axis=0) + 400.0
@@ -688,7 +689,7 @@ def plot_trajectories(
         lo = np.maximum(lo, [b.north_min, b.east_min])
         hi = np.minimum(hi, [b.north_max, b.east_max])
         nn, ee = np.meshgrid(np.linspace(lo[0], hi[0], 160), np.linspace(lo[1], hi[1], 160), indexing="ij")
-        h_ref = 0.5 * (sc.start[3] + sc.goal.height)
+        h_ref = 0.5 * (sc.start[3] + sc.require_goal().height)
         w = sc.field.updraft(nn, ee, np.full_like(nn, h_ref))
         if np.ptp(w) > 0:
             cs = ax.contourf(ee, nn, w, levels=12, cmap="Greys", alpha=0.55)
@@ -697,7 +698,12 @@ def plot_trajectories(
         if len(c):
             ax.plot(c[:, 1], c[:, 0], "k+", ms=8)
         th = np.linspace(0, 2 * np.pi, 100)
-        ax.plot(sc.goal.east + sc.goal.radius * np.sin(th), sc.goal.north + sc.goal.radius * np.cos(th), "g-", lw=2)
+        ax.plot(
+            sc.require_goal().east + sc.require_goal().radius * np.sin(th),
+            sc.require_goal().north + sc.require_goal().radius * np.cos(th),
+            "g-",
+            lw=2,
+        )
         ax.plot(sc.start[1], sc.start[0], "go", ms=7)
         for e in sorted(runs, key=lambda r: agents.index(r["agent"])):
             p = np.asarray(e["path"])
@@ -710,7 +716,8 @@ def plot_trajectories(
         ax.set_xlabel("east [m]")
         ax.set_ylabel("north [m]")
         ax.set_title(
-            f"{sc_name} (seed {seed}); start height {sc.start[3]:.0f} m, goal {sc.goal.height:.0f} m", fontsize=9
+            f"{sc_name} (seed {seed}); start height {sc.start[3]:.0f} m, goal {sc.require_goal().height:.0f} m",
+            fontsize=9,
         )
         ax.legend(fontsize=7, loc="best")
     out = Path(png)

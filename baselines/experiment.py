@@ -382,7 +382,7 @@ def _thermal_surface(ax: Any, scenario: Scenario, z_top: float) -> None:
 
 
 def _goal_sphere(ax: Any, scenario: Scenario) -> None:
-    g = scenario.goal
+    g = scenario.require_goal()
     u, v = np.meshgrid(np.linspace(0, 2 * math.pi, 30), np.linspace(0, math.pi, 15))
     ax.plot_surface(
         g.east + g.radius * np.cos(u) * np.sin(v),
@@ -412,7 +412,7 @@ def make_figures(
     # Figure 2: five example solution trajectories per planner, 3D
     examples = {p: [r for r in records if r["planner"] == p and r["solved"]][:n_examples] for p in planners}
     s = scenario.start
-    g = scenario.goal
+    g = scenario.require_goal()
     pts = [np.asarray(r["plan"]["trajectory"])[:, [0, 1, 3]] for rs in examples.values() for r in rs]
     pts.append(np.array([[s[0], s[1], s[3]], [g.north, g.east, g.height + g.radius]]))
     pts.append(np.array([[t.north, t.east, 0.0] for t in scenario.field.thermals]).reshape(-1, 3))

@@ -188,7 +188,7 @@ class GoalDistanceShaping(gym.Wrapper):
         """phi of the current state of the base env."""
         base: Any = self.env.unwrapped
         s = np.asarray(base.state, dtype=np.float64)
-        g = base.scenario.goal
+        g = base.scenario.require_goal()
         d = float(g.distance(s[0], s[1], s[3]))
         return -d / self.scale
 

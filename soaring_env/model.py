@@ -17,11 +17,16 @@ import numpy as np
 from numba import njit
 
 from soaring_env._validation import ConfigError, check_array_finite, check_range, check_type
-from soaring_env.physics.aircraft import Aircraft
+from soaring_env.physics.aircraft import Aircraft, bank_angle
 from soaring_env.physics.atmosphere import MAX_HEIGHT
 from soaring_env.primitives import (
+    COL_AIRSPEED,
+    COL_CHI_DOT_1,
+    COL_CHI_DOT_2,
+    COL_GAMMA,
     DEFAULT_MAX_SUBSTEP,
     N_PRIMITIVES,
+    ControlEnvelope,
     PrimitiveLibrary,
     Propagator,
     Rollout,
@@ -32,7 +37,9 @@ from soaring_env.scenario import Scenario, paper_scenario
 
 #: Edge outcome codes returned by :meth:`SoaringModel.classify`.
 FLYING, GOAL, CRASH, OUT_OF_BOUNDS = 0, 1, 2, 3
-OUTCOMES = ("flying", "goal", "crash", "out_of_bounds")
+#: Episode outcome of the cross-country task's envs (never an edge's: the battery is the env's).
+BATTERY_EMPTY = 4
+OUTCOMES = ("flying", "goal", "crash", "out_of_bounds", "battery_empty")
 
 #: Layout of the classification row (:func:`classify_params`): goal north, east, height, radius [m],
 #: domain north min/max, east min/max, height max [m]. Longer rows (the envs') start with it.
@@ -42,9 +49,9 @@ N_CLASSIFY_PARAMS = 9
 def classify_params(scenario: Scenario) -> np.ndarray:
     """Goal region and domain of ``scenario`` as the float64 row read by :func:`classify_row`."""
     g, bd = scenario.goal, scenario.bounds
-    return np.array(
-        [g.north, g.east, g.height, g.radius, bd.north_min, bd.north_max, bd.east_min, bd.east_max, bd.height_max]
-    )
+    # no goal: a region of radius -1 m, which no point is ever within
+    gn, ge, gh, gr = (0.0, 0.0, 0.0, -1.0) if g is None else (g.north, g.east, g.height, g.radius)
+    return np.array([gn, ge, gh, gr, bd.north_min, bd.north_max, bd.east_min, bd.east_max, bd.height_max])
 
 
 @njit(cache=True)
@@ -93,6 +100,8 @@ class SoaringModel:
     :param max_substep: largest integration substep near thermals [s].
     :param max_bank_deg: bank-angle limit [deg] used by action masks and planners (the tightest
         spiral needs 52 deg at Ts = 30 s).
+    :param envelope: the continuous controls actions map onto (default ``None``: the paper's
+        envelope of the primitives, :meth:`ControlEnvelope.paper`).
 
     The domain's ceiling must leave room for one edge below ``MAX_HEIGHT`` (11 km):
     ``bounds.height_max + Ts (fastest climb + the field's updraft bound) < MAX_HEIGHT``. Every edge of
@@ -105,9 +114,13 @@ class SoaringModel:
     library: PrimitiveLibrary = dataclasses.field(default_factory=PrimitiveLibrary)
     max_substep: float = DEFAULT_MAX_SUBSTEP
     max_bank_deg: float = 60.0
+    envelope: ControlEnvelope | None = None
 
     def __post_init__(self) -> None:
         check_type("scenario", self.scenario, Scenario)
+        if self.envelope is None:
+            object.__setattr__(self, "envelope", ControlEnvelope.paper(self.library))
+        check_type("envelope", self.envelope, ControlEnvelope)
         check_type("aircraft", self.aircraft, Aircraft)
         check_type("library", self.library, PrimitiveLibrary)
         object.__setattr__(self, "max_substep", check_substep("max_substep", self.max_substep))
@@ -153,13 +166,20 @@ class SoaringModel:
 
     # --- the continuous action envelope --------------------------------------------------------
     @property
+    def control_envelope(self) -> ControlEnvelope:
+        """The continuous envelope (``envelope``, resolved)."""
+        env = self.envelope
+        assert env is not None  # set in __post_init__
+        return env
+
+    @property
     def control_low(self) -> np.ndarray:
-        """Lower corner of the continuous envelope (v_a [m/s], chi_dot [rad/s], gamma [rad])."""
-        return self.library.control_bounds()[0]
+        """Lower corner of the box holding the continuous envelope (v_a [m/s], chi_dot [rad/s], gamma [rad])."""
+        return self.control_envelope.bounds()[0]
 
     @property
     def control_high(self) -> np.ndarray:
-        return self.library.control_bounds()[1]
+        return self.control_envelope.bounds()[1]
 
     def action_to_control(self, action) -> np.ndarray:
         """Map normalized actions in [-1, 1]^3 affinely onto the physical envelope."""
@@ -169,13 +189,11 @@ class SoaringModel:
         check_array_finite("action", a)
         if np.any(np.abs(a) > 1.0):
             raise ConfigError(f"action {a.tolist()!r} is outside [-1, 1]^3")
-        lo, hi = self.library.control_bounds()
-        return lo + 0.5 * (a + 1.0) * (hi - lo)
+        return self.control_envelope.to_control(a)
 
     def control_to_action(self, control) -> np.ndarray:
         """Inverse of :meth:`action_to_control`."""
-        lo, hi = self.library.control_bounds()
-        return 2.0 * (np.asarray(control, dtype=np.float64) - lo) / (hi - lo) - 1.0
+        return self.control_envelope.to_action(control)
 
     @functools.cached_property
     def propagator(self) -> Propagator:
@@ -207,6 +225,24 @@ class SoaringModel:
         bank = np.arctan(t[:, 1:2] * np.abs(t[:, 3:5]) / 9.80665).max(axis=1)
         return bank <= math.radians(self.max_bank_deg) + 1e-12
 
+    def stall_ok(self) -> np.ndarray:
+        """(174,) bool: primitives whose coordinated turns stay within ``aircraft.cl_max`` in the
+        thinnest air of the domain (its ceiling: an allowed primitive is allowed anywhere in it);
+        all True without a stall limit."""
+        ac = self.aircraft
+        if ac.cl_max is None:
+            return np.ones(N_PRIMITIVES, dtype=np.bool_)
+        t = self.library.table
+        v = t[:, COL_AIRSPEED]
+        rate = np.maximum(np.abs(t[:, COL_CHI_DOT_1]), np.abs(t[:, COL_CHI_DOT_2]))
+        cl = ac.lift_coefficient(v, t[:, COL_GAMMA], bank_angle(v, rate), self.scenario.bounds.height_max)
+        return cl <= ac.cl_max * (1.0 + 1e-12)
+
+    def allowed_primitives(self) -> np.ndarray:
+        """(174,) bool: the primitives action masks and planners may use, within the bank limit
+        (:meth:`bank_ok`) and the stall limit (:meth:`stall_ok`)."""
+        return self.bank_ok() & self.stall_ok()
+
     def end_height_cap(self) -> float:
         """Highest height [m] at which any plan can end: the end of its goal edge.
 
@@ -218,7 +254,7 @@ class SoaringModel:
         cost still to go from height h (used by the planners and the reference search).
         """
         sc = self.scenario
-        g = sc.goal
+        g = sc.require_goal()
         f = sc.field
         top = g.height + g.radius
         if not f.thermals:

@@ -28,6 +28,7 @@ from soaring_env._validation import (
     as_float_array,
     check_array_finite,
     check_int,
+    check_pair,
     check_range,
     check_type,
 )
@@ -161,6 +162,126 @@ class PrimitiveLibrary:
         w = math.radians(max(SPIRAL_TURN_DEG)) / self.duration
         g = math.radians(max(GAMMAS_DEG))
         return np.array([min(SPEEDS), -w, -g]), np.array([max(SPEEDS), w, g])
+
+
+ENVELOPES = ("paper", "physical")
+
+
+@dataclass(frozen=True)
+class ControlEnvelope:
+    """The continuous controls ``(v_a [m/s], chi_dot [rad/s], gamma [rad])`` that normalized
+    actions in [-1, 1]^3 map onto (one home for the mapping: envs, model and planners call it).
+
+    * ``"paper"``: affine onto the box spanned by the primitives, v_a in [10, 20] m/s,
+      chi_dot in +-1080 deg / Ts, gamma in +-45 deg (:meth:`PrimitiveLibrary.control_bounds`).
+      Its turn rates scale with 1 / Ts, so it is meant for Ts near the paper's 30 s.
+    * ``"physical"``: set by physical limits, independent of Ts: a0 -> airspeed affine in
+      ``airspeed``; a1 -> bank angle ``phi = a1 * phi_lim(v_a)`` with chi_dot = g tan(phi) / v_a
+      (coordinated turn), ``phi_lim(v) = min(max_bank, stall bank)`` where the stall bank keeps
+      ``C_L = 2 m g / (rho v^2 S cos phi) <= cl_max`` in the thinnest air of the domain (its
+      ceiling), so every action is flyable anywhere in it; a2 -> gamma affine in ``gamma``.
+
+    :param kind: ``"paper"`` or ``"physical"``.
+    :param airspeed: (low, high) [m/s].
+    :param gamma: (low, high) flight-path angle [rad].
+    :param chi_dot_max: ``"paper"``: largest course rate [rad/s] (the box is +-it).
+    :param max_bank: ``"physical"``: bank-angle limit [rad].
+    :param stall_k: ``"physical"``: ``2 m g / (rho_ceiling S cl_max)`` [m^2/s^2] (0: no stall limit):
+        level flight at v_a stalls beyond ``cos(phi) < stall_k / v_a^2``.
+    """
+
+    kind: str
+    airspeed: tuple[float, float]
+    gamma: tuple[float, float]
+    chi_dot_max: float = 0.0
+    max_bank: float = 0.0
+    stall_k: float = 0.0
+
+    @classmethod
+    def paper(cls, library: PrimitiveLibrary) -> ControlEnvelope:
+        """The envelope of the primitives (the default of the paper's envs)."""
+        lo, hi = library.control_bounds()
+        return cls("paper", (float(lo[0]), float(hi[0])), (float(lo[2]), float(hi[2])), chi_dot_max=float(hi[1]))
+
+    @classmethod
+    def physical(
+        cls,
+        aircraft: Aircraft,
+        *,
+        max_bank_deg: float,
+        height_max: float,
+        airspeed: tuple[float, float] = (12.0, 25.0),
+        gamma_deg: tuple[float, float] = (-30.0, 20.0),
+    ) -> ControlEnvelope:
+        """The physical envelope of ``aircraft`` in a domain whose ceiling is ``height_max`` [m].
+
+        :raises ConfigError: for a bad range, or an airspeed low end at which even wings-level
+            flight stalls at the ceiling (naming the least airspeed allowed).
+        """
+        v_lo, v_hi = check_pair("airspeed", airspeed, 0.0, 100.0)
+        if v_lo <= 0.0 or v_hi <= v_lo:
+            raise ConfigError(f"airspeed={airspeed!r} must be (low, high) with 0 < low < high <= 100 m/s")
+        g_lo, g_hi = check_pair("gamma_deg", gamma_deg, -60.0, 60.0)
+        if g_hi <= g_lo:
+            raise ConfigError(f"gamma_deg={gamma_deg!r} must be (low, high) with low < high within +-60 deg")
+        bank = check_range("max_bank_deg", max_bank_deg, 0.0, 90.0, low_open=True, high_open=True)
+        k = 0.0
+        if aircraft.cl_max is not None:
+            rho = _density(min(max(float(height_max), 0.0), MAX_HEIGHT - 1.0))
+            k = 2.0 * aircraft.weight / (rho * aircraft.wing_area * aircraft.cl_max)
+            if k >= v_lo * v_lo:
+                raise ConfigError(
+                    f"airspeed={airspeed!r}: {v_lo:g} m/s stalls at the ceiling ({height_max:g} m) with "
+                    f"cl_max={aircraft.cl_max:g}; allowed: low > {math.sqrt(k):.3f} m/s"
+                )
+        return cls(
+            "physical", (v_lo, v_hi), (math.radians(g_lo), math.radians(g_hi)), max_bank=math.radians(bank), stall_k=k
+        )
+
+    def bank_limit(self, airspeed) -> np.ndarray:
+        """``"physical"``: phi_lim [rad] at airspeed(s) [m/s]."""
+        v = np.asarray(airspeed, dtype=np.float64)
+        if self.stall_k == 0.0:
+            return np.full(v.shape, self.max_bank)
+        return np.minimum(self.max_bank, np.arccos(np.minimum(self.stall_k / (v * v), 1.0)))
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The smallest box (low, high) of (v_a, chi_dot, gamma) holding the envelope."""
+        if self.kind == "paper":
+            w = self.chi_dot_max
+        else:
+            v = np.linspace(self.airspeed[0], self.airspeed[1], 1001)
+            w = float(np.max(G * np.tan(self.bank_limit(v)) / v))
+        return (
+            np.array([self.airspeed[0], -w, self.gamma[0]]),
+            np.array([self.airspeed[1], w, self.gamma[1]]),
+        )
+
+    def to_control(self, action: np.ndarray) -> np.ndarray:
+        """Map normalized actions (..., 3) in [-1, 1] onto controls (..., 3) (no checks: callers validate)."""
+        a = np.asarray(action, dtype=np.float64)
+        if self.kind == "paper":
+            lo, hi = self.bounds()
+            return lo + 0.5 * (a + 1.0) * (hi - lo)
+        out = np.empty(a.shape)
+        v = self.airspeed[0] + 0.5 * (a[..., 0] + 1.0) * (self.airspeed[1] - self.airspeed[0])
+        out[..., 0] = v
+        out[..., 1] = G * np.tan(a[..., 1] * self.bank_limit(v)) / v
+        out[..., 2] = self.gamma[0] + 0.5 * (a[..., 2] + 1.0) * (self.gamma[1] - self.gamma[0])
+        return out
+
+    def to_action(self, control: np.ndarray) -> np.ndarray:
+        """Inverse of :meth:`to_control` (controls outside the envelope map outside [-1, 1])."""
+        c = np.asarray(control, dtype=np.float64)
+        if self.kind == "paper":
+            lo, hi = self.bounds()
+            return 2.0 * (c - lo) / (hi - lo) - 1.0
+        out = np.empty(c.shape)
+        v = c[..., 0]
+        out[..., 0] = 2.0 * (v - self.airspeed[0]) / (self.airspeed[1] - self.airspeed[0]) - 1.0
+        out[..., 1] = np.arctan(v * c[..., 1] / G) / self.bank_limit(v)
+        out[..., 2] = 2.0 * (c[..., 2] - self.gamma[0]) / (self.gamma[1] - self.gamma[0]) - 1.0
+        return out
 
 
 @dataclass(frozen=True)

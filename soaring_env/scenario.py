@@ -14,12 +14,13 @@ files of :meth:`Scenario.save`; the envs add the mode ``"random"`` (a new scenar
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import json
 import math
 import os
 import re
 import tempfile
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -131,20 +132,21 @@ class Scenario:
 
     :param field: ambient wind and thermals.
     :param start: start state ``(Pn [m], Pe [m], chi [rad], h [m])``.
-    :param goal: goal region.
+    :param goal: goal region, or ``None`` for tasks without one (thermal climb).
     :param bounds: flight domain.
     :param name: label used in results and plots.
     """
 
     field: WindField = dataclasses.field(default_factory=WindField)
     start: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 300.0)
-    goal: GoalRegion = dataclasses.field(default_factory=GoalRegion)
+    goal: GoalRegion | None = dataclasses.field(default_factory=GoalRegion)
     bounds: Bounds = dataclasses.field(default_factory=Bounds)
     name: str = "custom"
 
     def __post_init__(self) -> None:
         check_type("field", self.field, WindField)
-        check_type("goal", self.goal, GoalRegion)
+        if self.goal is not None:
+            check_type("goal", self.goal, GoalRegion)
         check_type("bounds", self.bounds, Bounds)
         check_type("name", self.name, str)
         if isinstance(self.start, (str, bytes)) or not hasattr(self.start, "__len__") or len(self.start) != 4:
@@ -159,6 +161,8 @@ class Scenario:
                 f"east [{self.bounds.east_min:g}, {self.bounds.east_max:g}], height (0, {self.bounds.height_max:g}]"
             )
         g = self.goal
+        if g is None:
+            return
         if not bool(self.bounds.contains(g.north, g.east, g.height)):
             raise ConfigError(
                 f"goal centre (north={g.north:g}, east={g.east:g}, height={g.height:g}) is outside the domain "
@@ -167,6 +171,13 @@ class Scenario:
             )
         if bool(g.contains(n, e, h)):
             raise ConfigError("start lies inside the goal region; the problem is already solved")
+
+    def require_goal(self) -> GoalRegion:
+        """The goal region; a :class:`ConfigError` for a scenario without one (for goal-directed
+        planners and scores)."""
+        if self.goal is None:
+            raise ConfigError(f"scenario {self.name!r} has no goal region; this needs a goal-reaching scenario")
+        return self.goal
 
     @property
     def start_state(self) -> np.ndarray:
@@ -182,7 +193,7 @@ class Scenario:
         return {
             "name": self.name,
             "start": list(self.start),
-            "goal": asdict(self.goal),
+            "goal": None if self.goal is None else asdict(self.goal),
             "bounds": asdict(self.bounds),
             "field": {
                 "model": f.model,
@@ -220,7 +231,11 @@ class Scenario:
             start = top["start"]
             if not isinstance(start, (list, tuple)):
                 raise ConfigError(f"{source}: start={start!r} must be a list of 4 numbers [Pn, Pe, chi, h]")
-            goal = _keys(top["goal"], f"{source}: goal", required=(), optional=("north", "east", "height", "radius"))
+            goal = (
+                None
+                if top["goal"] is None
+                else _keys(top["goal"], f"{source}: goal", required=(), optional=("north", "east", "height", "radius"))
+            )
             bounds = _keys(
                 top["bounds"],
                 f"{source}: bounds",
@@ -230,7 +245,7 @@ class Scenario:
             return cls(
                 field=WindField(thermals=thermals, **fd),
                 start=tuple(start),
-                goal=GoalRegion(**goal),
+                goal=None if goal is None else GoalRegion(**goal),
                 bounds=Bounds(**bounds),
                 name=top.get("name", "custom"),
             )
@@ -313,21 +328,24 @@ RANDOM = "random"
 #: First seed of the held-out test scenarios ``random-10000``, ``random-10001``, ... (training draws
 #: from each env's own stream; PPO's validation scenarios use seeds 5000+).
 HELDOUT_SEED0 = 10_000
-_RANDOM_SEED = re.compile(r"^random-([0-9]+)$")
+_RANDOM_SEED = re.compile(r"^(random|climb|xc)-([0-9]+)$")
 _FORMS = (
     "random-<seed> (a random scenario drawn with that seed; held-out: random-10000, random-10001, ...), "
+    "climb-<seed> and xc-<seed> (the thermal-climb and cross-country tasks' scenarios, same seeds), "
     "a path to a scenario file (*.json, written by Scenario.save), "
     f"and in the envs {RANDOM!r} (a new random scenario at every reset)"
 )
 
 
-def heldout_names(n: int, start: int = HELDOUT_SEED0) -> list[str]:
-    """Names of the first ``n`` held-out random scenarios (``random-10000``, ...)."""
-    return [f"random-{start + k}" for k in range(n)]
+def heldout_names(n: int, start: int = HELDOUT_SEED0, family: str = "random") -> list[str]:
+    """Names of the first ``n`` held-out scenarios of a generator family (``random-10000``, ...;
+    ``family`` is ``"random"`` (goal reaching), ``"climb"`` or ``"xc"``)."""
+    check_choice("family", family, tuple(GENERATORS))
+    return [f"{family}-{start + k}" for k in range(n)]
 
 
 def _parse_name(name: str | os.PathLike[str]) -> tuple[str, Any]:
-    """What a scenario name refers to: ``("named", factory)``, ``("random", seed)`` or ``("file", path)``.
+    """What a scenario name refers to: ``("named", factory)``, ``("random", (family, seed))`` or ``("file", path)``.
 
     One namespace for every place that takes a scenario by name: a name of :data:`SCENARIOS`,
     ``"random-<seed>"``, or a path (a ``PathLike``, or a string ending in ``.json``).
@@ -340,7 +358,7 @@ def _parse_name(name: str | os.PathLike[str]) -> tuple[str, Any]:
         return "named", SCENARIOS[name]
     m = _RANDOM_SEED.match(name)
     if m:
-        return "random", int(m.group(1))
+        return "random", (m.group(1), int(m.group(2)))
     if name.lower().endswith(".json"):
         return "file", Path(name)
     if name == RANDOM:
@@ -349,6 +367,13 @@ def _parse_name(name: str | os.PathLike[str]) -> tuple[str, Any]:
             "reset (gym.make(..., scenario='random')); for one random scenario use 'random-<seed>', e.g. 'random-10000'"
         )
     raise ConfigError(f"scenario {name!r} is unknown; known: {', '.join(sorted(SCENARIOS))}, {_FORMS}")
+
+
+def scenario_family(name: str | os.PathLike[str]) -> str | None:
+    """The generator family of a ``<family>-<seed>`` name (``"random"``, ``"climb"``, ``"xc"``),
+    else None (named scenarios, files)."""
+    kind, value = _parse_name(name)
+    return value[0] if kind == "random" else None
 
 
 def check_scenario_name(name: str) -> str:
@@ -364,7 +389,9 @@ def get_scenario(name: str | os.PathLike[str], random_scenario: Mapping[str, Any
 
     :param name: a named scenario (``"paper"``); ``"random-<seed>"``: :func:`make_scenario` drawn
         from ``np.random.default_rng(seed)`` with ``random_scenario``, named ``name`` (the
-        held-out test set is :func:`heldout_names`); or a path to a JSON file of :meth:`Scenario.save`.
+        held-out test set is :func:`heldout_names`); ``"climb-<seed>"``, ``"xc-<seed>"``: the same
+        with :func:`make_climb_scenario`, :func:`make_cross_country_scenario`; or a path to a
+        JSON file of :meth:`Scenario.save`.
     :param random_scenario: :func:`make_scenario` keywords for ``"random-<seed>"`` (an env's
         ``random_scenario``, so that held-out scenarios follow its training distribution); ignored
         by the other forms.
@@ -374,8 +401,23 @@ def get_scenario(name: str | os.PathLike[str], random_scenario: Mapping[str, Any
     if kind == "named":
         return value()
     if kind == "random":
-        return make_scenario(np.random.default_rng(value), **{**dict(random_scenario or {}), "name": str(name)})
+        family, seed = value
+        gen = GENERATORS[family]
+        check_generator_keywords(gen, random_scenario or {})
+        return gen(np.random.default_rng(seed), **{**dict(random_scenario or {}), "name": str(name)})
     return Scenario.load(value)
+
+
+def check_generator_keywords(generator: Any, kwargs: Mapping[str, Any], field: str = "random_scenario") -> None:
+    """A :class:`ConfigError` naming ``field`` if ``kwargs`` has keys ``generator`` does not take."""
+    if not isinstance(kwargs, Mapping):
+        raise ConfigError(f"{field}={kwargs!r} must be a dict of {generator.__name__} keywords")
+    allowed = [p for p in inspect.signature(generator).parameters if p not in ("rng", "name")]
+    unknown = sorted(str(k) for k in kwargs if k not in allowed)
+    if unknown:
+        raise ConfigError(
+            f"{field} has unknown key(s) {unknown!r} for {generator.__name__}; allowed: {', '.join(allowed)}"
+        )
 
 
 #: Goal radius of random scenarios [m].
@@ -494,3 +536,157 @@ def make_scenario(
             name=name,
         )
     raise ConfigError("could not draw a scenario that fits the bounds; widen bounds or shorten goal_distance")
+
+
+def _draw_wind(rng: np.random.Generator, wind_speed: tuple[float, float]) -> tuple[float, float]:
+    """(north, east) [m/s] of a wind of uniform speed in ``wind_speed`` and uniform direction."""
+    ws = rng.uniform(*wind_speed)
+    wd = rng.uniform(-math.pi, math.pi)
+    return ws * math.cos(wd), ws * math.sin(wd)
+
+
+def _check_field_ranges(
+    n_thermals: Any, strength: Any, wind_speed: Any, model: Any, zi: Any, drift: Any, name: Any
+) -> tuple[tuple[int, int], tuple[float, float], tuple[float, float], float, bool]:
+    """The checks every random-scenario generator shares (see :func:`make_scenario`)."""
+    n = check_int_pair("n_thermals", n_thermals, 0, MAX_RANDOM_THERMALS)
+    st = check_pair("strength", strength, 0.0, 20.0)
+    if st[0] <= 0.0:
+        raise ConfigError(f"strength={strength!r} must have low > 0 m/s (a thermal's w* or peak is positive)")
+    ws = check_pair("wind_speed", wind_speed, 0.0, 50.0)
+    check_type("model", model, str)
+    check_choice("model", model, THERMAL_MODELS)
+    z = check_positive("zi", zi)
+    d = check_bool("drift", drift)
+    check_type("name", name, str)
+    return n, st, ws, z, d
+
+
+#: Goal radius of the cross-country task [m].
+CROSS_COUNTRY_GOAL_RADIUS = 300.0
+
+
+def make_climb_scenario(
+    rng: np.random.Generator,
+    *,
+    n_thermals: tuple[int, int] = (3, 6),
+    strength: tuple[float, float] = (1.5, 3.5),
+    thermal_radius: float = 1000.0,
+    wind_speed: tuple[float, float] = (0.0, 3.0),
+    height: tuple[float, float] = (100.0, 300.0),
+    model: str = "allen",
+    zi: float = 1400.0,
+    drift: bool = False,
+    half_width: float = 3000.0,
+    height_max: float = 1500.0,
+    name: str = "climb",
+) -> Scenario:
+    """A thermal-climb scenario drawn only from ``rng``: the aircraft starts low among several
+    thermals and has no goal (the task is to gain energy in a fixed time).
+
+    Start at the domain centre (origin) with a uniform heading, at a height uniform in ``height``
+    [m]; ``n_thermals`` thermals uniform over the disc of radius ``thermal_radius`` [m] around the
+    start, strengths uniform in ``strength`` [m/s]; wind as :func:`make_scenario`. The domain is
+    the square of ``half_width`` [m] around the origin, ceiling ``height_max`` [m].
+    """
+    check_type("rng", rng, np.random.Generator)
+    n_thermals, strength, wind_speed, zi, drift = _check_field_ranges(
+        n_thermals, strength, wind_speed, model, zi, drift, name
+    )
+    half = check_positive("half_width", half_width)
+    r_max = check_range("thermal_radius", thermal_radius, 0.0, half)
+    bounds = Bounds(-half, half, -half, half, check_range("height_max", height_max, 0.0, MAX_HEIGHT, low_open=True))
+    height = check_pair("height", height, 0.0, bounds.height_max)
+    if height[0] <= 0.0:
+        raise ConfigError(f"height={height!r} must have low > 0 m (above the ground)")
+    chi = rng.uniform(-math.pi, math.pi)
+    h0 = rng.uniform(*height)
+    k = int(rng.integers(n_thermals[0], n_thermals[1] + 1))
+    thermals = []
+    for _ in range(k):
+        r = r_max * math.sqrt(rng.uniform(0.0, 1.0))  # uniform over the disc
+        a = rng.uniform(-math.pi, math.pi)
+        thermals.append(Thermal(north=r * math.cos(a), east=r * math.sin(a), strength=rng.uniform(*strength)))
+    wn, we = _draw_wind(rng, wind_speed)
+    return Scenario(
+        field=WindField(thermals=tuple(thermals), model=model, zi=zi, wind_north=wn, wind_east=we, drift=drift),
+        start=(0.0, 0.0, chi, h0),
+        goal=None,
+        bounds=bounds,
+        name=name,
+    )
+
+
+def make_cross_country_scenario(
+    rng: np.random.Generator,
+    *,
+    goal_distance: tuple[float, float] = (8000.0, 15000.0),
+    thermals_per_km: tuple[float, float] = (1.0, 2.0),
+    corridor: float = 2000.0,
+    strength: tuple[float, float] = (1.5, 3.5),
+    wind_speed: tuple[float, float] = (0.0, 3.0),
+    height: tuple[float, float] = (300.0, 500.0),
+    goal_height: float = 300.0,
+    model: str = "allen",
+    zi: float = 1400.0,
+    drift: bool = False,
+    margin: float = 3000.0,
+    height_max: float = 1500.0,
+    name: str = "xc",
+) -> Scenario:
+    """A cross-country scenario drawn only from ``rng``: a goal ``goal_distance`` [m] away in a
+    uniform direction across a field of many thermals.
+
+    Start at the origin heading within +-90 deg of the goal bearing, at a height uniform in
+    ``height`` [m]; goal region of radius ``CROSS_COUNTRY_GOAL_RADIUS`` (300 m) centred at
+    ``goal_height`` [m]; ``round(rate * distance / 1 km)`` thermals (rate uniform in
+    ``thermals_per_km``) uniform along the line from 5 % to 100 % of the distance and within
+    ``corridor`` [m] of it. The domain is the bounding box of start and goal grown by ``margin``
+    [m], ceiling ``height_max`` [m]. The task's battery (see the cross-country env) is what
+    makes the thermals necessary.
+    """
+    check_type("rng", rng, np.random.Generator)
+    rate = check_pair("thermals_per_km", thermals_per_km, 0.0, 10.0)
+    _, strength, wind_speed, zi, drift = _check_field_ranges((0, 0), strength, wind_speed, model, zi, drift, name)
+    dist_range = check_pair("goal_distance", goal_distance, CROSS_COUNTRY_GOAL_RADIUS, 100_000.0)
+    if dist_range[0] <= CROSS_COUNTRY_GOAL_RADIUS:
+        raise ConfigError(f"goal_distance={goal_distance!r} must have low > {CROSS_COUNTRY_GOAL_RADIUS:g} m")
+    width = check_positive("corridor", corridor)
+    pad = check_range("margin", margin, width, 100_000.0)
+    top = check_range("height_max", height_max, 0.0, MAX_HEIGHT, low_open=True)
+    height = check_pair("height", height, 0.0, top)
+    if height[0] <= 0.0:
+        raise ConfigError(f"height={height!r} must have low > 0 m (above the ground)")
+    gh = check_range("goal_height", goal_height, 0.0, top, low_open=True)
+    dist = rng.uniform(*dist_range)
+    bearing = rng.uniform(-math.pi, math.pi)
+    gn, ge = dist * math.cos(bearing), dist * math.sin(bearing)
+    chi = bearing + rng.uniform(-math.pi / 2, math.pi / 2)
+    chi = (chi + math.pi) % (2 * math.pi) - math.pi
+    h0 = rng.uniform(*height)
+    k = min(int(round(rng.uniform(*rate) * dist / 1000.0)), MAX_RANDOM_THERMALS)
+    thermals = []
+    for _ in range(k):
+        along = rng.uniform(0.05, 1.0) * dist
+        across = rng.uniform(-width, width)
+        tn = along * math.cos(bearing) - across * math.sin(bearing)
+        te = along * math.sin(bearing) + across * math.cos(bearing)
+        thermals.append(Thermal(north=tn, east=te, strength=rng.uniform(*strength)))
+    wn, we = _draw_wind(rng, wind_speed)
+    bounds = Bounds(min(0.0, gn) - pad, max(0.0, gn) + pad, min(0.0, ge) - pad, max(0.0, ge) + pad, top)
+    return Scenario(
+        field=WindField(thermals=tuple(thermals), model=model, zi=zi, wind_north=wn, wind_east=we, drift=drift),
+        start=(0.0, 0.0, chi, h0),
+        goal=GoalRegion(north=gn, east=ge, height=gh, radius=CROSS_COUNTRY_GOAL_RADIUS),
+        bounds=bounds,
+        name=name,
+    )
+
+
+#: The random-scenario generators by family: ``<family>-<seed>`` names and the envs' ``"random"``
+#: mode draw from them (goal reaching ``random``, thermal climb ``climb``, cross-country ``xc``).
+GENERATORS: dict[str, Callable[..., Scenario]] = {
+    "random": make_scenario,
+    "climb": make_climb_scenario,
+    "xc": make_cross_country_scenario,
+}

@@ -48,7 +48,7 @@ that displace a good path's nodes later). :func:`search` therefore runs beams of
 twice that, ... up to ``beam_width``, each seeded with the best plan of the ones before (a seeded
 path's nodes stay in the beam at every depth), so the best cost never gets worse as the knob grows.
 
-Control sets. ``"primitive"``: the 174 primitives (those within the model's bank limit), i.e. the
+Control sets. ``"primitive"``: the 174 primitives (those within the model's bank and stall limits, ``model.allowed_primitives()``), i.e. the
 actions of ``soaring/Soaring-v0``. ``"continuous"``: a grid of normalized ``Box(float32)`` actions of
 ``soaring/SoaringContinuous-v0`` over airspeeds x course rates x path angles, where the path angles
 are the primitives' fixed ones plus, for every (airspeed, course rate) pair, the zero-thrust glide
@@ -108,7 +108,7 @@ class ReferenceConfig:
     :param gammas_deg: fixed path angles of the continuous control set [deg] (the zero-thrust glide
         angle of each (airspeed, turn) pair is always added).
     :param primitives: restrict the primitive control set to these indices (None: all within the
-        model's bank limit); for tests and ablations.
+        model's bank and stall limits); for tests and ablations.
     :param region_size: side of the squares of the beam's diversity quota [m].
     :param region_quota: nodes per square taken first into the beam (0: no quota).
     :param planner_iterations: for the primitives (:func:`~baselines.reference.compute_reference`;
@@ -193,11 +193,11 @@ def control_set(model: SoaringModel, sampler: str, config: ReferenceConfig) -> n
     (M, 1) primitive indices or (M, 3) float32-exact normalized actions in [-1, 1]."""
     check_choice("sampler", sampler, SAMPLERS)
     if sampler == "primitive":
-        ok = model.bank_ok()
+        ok = model.allowed_primitives()
         idx = np.flatnonzero(ok) if config.primitives is None else np.array(config.primitives, dtype=np.int64)
         if np.any(idx >= model.n_primitives) or not np.all(ok[idx]):
             raise ConfigError(
-                f"primitives={config.primitives!r}: allowed: indices 0..{model.n_primitives - 1} within the bank limit"
+                f"primitives={config.primitives!r}: allowed: indices 0..{model.n_primitives - 1} within the bank and stall limits"
             )
         return np.unique(idx).astype(np.float64)[:, None]
     lo, hi = model.control_low, model.control_high
@@ -353,7 +353,7 @@ class _Context:
     def make(
         cls, model: SoaringModel, problem: SoaringProblem, sampler: str, ctrls: np.ndarray, cfg: ReferenceConfig
     ) -> _Context:
-        g = model.scenario.goal
+        g = model.scenario.require_goal()
         if sampler == "continuous":
             speeds = model.action_to_control(ctrls)[:, 0]
         else:

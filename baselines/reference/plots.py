@@ -52,7 +52,7 @@ def plot_reference(ref: ScenarioReference, png: str | Path) -> Path:
     for t in sc.field.thermals:
         r2 = sc.field.allen_profile(sc.start[3])["r2"] if sc.field.model == "allen" else t.radius
         ax.add_patch(plt.Circle((t.east, t.north), r2, color="gold", alpha=0.5, lw=0))
-    g = sc.goal
+    g = sc.require_goal()
     ax.add_patch(plt.Circle((g.east, g.north), g.radius, fill=False, color="green", lw=1.5))
     ax.plot(sc.start[1], sc.start[0], "k^", ms=9, label="start")
     for sampler, r in ref.samplers.items():

@@ -131,7 +131,7 @@ def _plan(
     cfg = SST_CONFIGS["paper"]
     prob = SoaringProblem(model, sampler, cfg)
     b = model.scenario.bounds
-    allowed = model.bank_ok()
+    allowed = model.allowed_primitives()
 
     space = ob.CompoundStateSpace()
     geo = ob.RealVectorStateSpace(3)
@@ -197,7 +197,7 @@ def _plan(
     si.setPropagationStepSize(1.0)
     si.setMinMaxControlDuration(1, 1)
     si.setup()
-    goal_region = model.scenario.goal
+    goal_region = model.scenario.require_goal()
 
     class Goal(ob.GoalRegion):  # the goal edge ends at its first point inside the region
         def __init__(self, s: Any) -> None:

@@ -238,7 +238,7 @@ def plan_soaring(
     res = planner.run(time_limit=time_limit, max_iterations=max_iterations)
     if not res.solved and partial:
         tree = planner.tree()
-        g = model.scenario.goal
+        g = model.scenario.require_goal()
         d = g.distance(tree.states[:, 0], tree.states[:, 1], tree.states[:, 3])
         res = planner.result_for(int(tree.ids[int(np.argmin(d))]))
     return PlanningResult(plan=plan_from_result(problem, res), stats=res.stats)

@@ -14,7 +14,7 @@ uniformly over the flight domain (north, east, height) and all courses (a ``ther
 of them over the thermals, off by default).
 
 Controls: ``"primitive"`` -- an index into the 174 primitives (by default only among those within
-the model's bank limit, ``model.bank_ok()``); ``"continuous"`` -- a normalized action in [-1, 1]^3
+the model's bank and stall limits, ``model.allowed_primitives()``); ``"continuous"`` -- a normalized action in [-1, 1]^3
 mapped by ``model.action_to_control`` onto the envelope of the primitives ((v_a, chi_dot, gamma) in
 [10, 20] m/s x +-1080 deg/Ts x +-45 deg), held for Ts. Both are exactly the actions of the discrete
 and continuous envs. The paper's planner (``SST_CONFIGS["paper"]``) draws them uniformly; the
@@ -83,7 +83,7 @@ class SoaringSSTConfig:
     :param heading_scale: weight of the course angle in the distance [m/rad].
     :param height_scale: weight of the height in the distance [-].
     :param batch_size: expansions per round (1 = one-at-a-time SST, see ``baselines.sst.core``).
-    :param mask_primitives: draw only the primitives within the model's bank limit.
+    :param mask_primitives: draw only the primitives within the model's bank and stall limits.
     :param max_edges: most edges (env steps) a plan may have, e.g. the env's ``max_episode_steps``
         (None: unlimited, as in the paper).
     :param glide_share: probability of a zero-thrust glide path angle (continuous) [-].
@@ -200,7 +200,7 @@ class SoaringProblem:
                 f"north [{b.north_min:g}, {b.north_max:g}], east [{b.east_min:g}, {b.east_max:g}], "
                 f"height (0, {b.height_max:g}]"
             )
-        g = sc.goal
+        g = sc.require_goal()
         if bool(g.contains(x0[0], x0[1], x0[3])):
             raise SSTError("start lies inside the goal region; there is nothing to plan")
         t0 = check_finite("t0", t0)
@@ -221,7 +221,7 @@ class SoaringProblem:
         )
         table = model.library.table
         if sampler == "primitive":
-            allowed = model.bank_ok() if cfg.mask_primitives else np.ones(model.n_primitives, bool)
+            allowed = model.allowed_primitives() if cfg.mask_primitives else np.ones(model.n_primitives, bool)
             self.sampler: IndexSampler | BoxSampler = IndexSampler(model.n_primitives, allowed)
             # circling primitives: every segment turns on a circle within the radius band
             turn = np.minimum(np.abs(table[:, COL_CHI_DOT_1]), np.abs(table[:, COL_CHI_DOT_2]))
@@ -354,7 +354,7 @@ class SoaringProblem:
         """
         m = self.model
         lo, hi = m.control_low, m.control_high
-        g = m.scenario.goal
+        g = m.scenario.require_goal()
         f = m.scenario.field
         n_, e_, chi, h = states[:, S_N], states[:, S_E], states[:, S_CHI], states[:, S_H]
         ts = m.library.duration
@@ -511,7 +511,7 @@ class SoaringProblem:
         ids = self._home_ids
         n, k = len(states), len(ids)
         e = self.propagate(np.repeat(states, k, axis=0), np.tile(ids, n).astype(np.float64)[:, None])
-        g = self.model.scenario.goal
+        g = self.model.scenario.require_goal()
         end = e.states
         # the region is a ball: at height h it reaches sqrt(r^2 - (h - h_goal)^2) out; height above
         # it must be lost on the way (charged as potential: g per metre)
@@ -593,8 +593,8 @@ def check_goal_reachable(model: SoaringModel) -> None:
     lib = model.library
     wind = math.hypot(sc.field.wind_north, sc.field.wind_east)
     spacing = (float(model.control_high[0]) + wind) * lib.duration / lib.n_points
-    if sc.goal.radius < 0.5 * spacing:
+    if sc.require_goal().radius < 0.5 * spacing:
         raise SSTError(
-            f"goal.radius={sc.goal.radius!r} m is too small to be reached in principle: flown points are up to "
+            f"goal.radius={sc.require_goal().radius!r} m is too small to be reached in principle: flown points are up to "
             f"{spacing:.3g} m apart (Ts={lib.duration:g} s, N={lib.n_points}); allowed: radius >= {0.5 * spacing:.3g} m"
         )

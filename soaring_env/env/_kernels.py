@@ -30,6 +30,9 @@ def post_step(
     k_obs: int,
     low: np.ndarray,
     high: np.ndarray,
+    goal_on: int,
+    th_base: int,
+    noise: np.ndarray,
     codes: np.ndarray,
     ks: np.ndarray,
     new_states: np.ndarray,
@@ -59,7 +62,23 @@ def post_step(
         lift[b] = lift_b
         dist[b] = goal_distance(n, e, h, prm[b])
         upd[b] = observe_row(
-            n, e, chi, h, t_new[b], ctrl[b, 0], lift_b, prm[b], th[b, : nth[b]], scales, k_obs, low, high, obs[b]
+            n,
+            e,
+            chi,
+            h,
+            t_new[b],
+            ctrl[b, 0],
+            lift_b,
+            prm[b],
+            th[b, : nth[b]],
+            scales,
+            k_obs,
+            low,
+            high,
+            goal_on,
+            th_base,
+            noise[b],
+            obs[b],
         )
 
 

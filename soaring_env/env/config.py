@@ -7,18 +7,35 @@ keyword arguments to ``gym.make`` override single fields (``gym.make(id, goal_bo
 from __future__ import annotations
 
 import dataclasses
-import inspect
 import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
-from soaring_env._validation import ConfigError, check_bool, check_finite, check_int, check_positive, check_range
+from soaring_env._validation import (
+    ConfigError,
+    check_bool,
+    check_choice,
+    check_finite,
+    check_int,
+    check_pair,
+    check_positive,
+    check_range,
+    check_type,
+)
 from soaring_env.physics.aircraft import Aircraft
-from soaring_env.primitives import DEFAULT_MAX_SUBSTEP, MAX_POINTS, check_duration, check_substep
-from soaring_env.scenario import RANDOM, Scenario, get_scenario, make_scenario
+from soaring_env.primitives import DEFAULT_MAX_SUBSTEP, ENVELOPES, MAX_POINTS, check_duration, check_substep
+from soaring_env.scenario import (
+    GENERATORS,
+    RANDOM,
+    Scenario,
+    check_generator_keywords,
+    get_scenario,
+    make_scenario,
+    scenario_family,
+)
 
 #: Reward scale: one reward unit is one kJ/kg of specific energy.
 ENERGY_SCALE = 1000.0
@@ -26,6 +43,8 @@ ENERGY_SCALE = 1000.0
 #: A scenario as the envs take it: a name or path of :func:`~soaring_env.scenario.get_scenario`,
 #: ``"random"`` (a new scenario drawn from ``env.np_random`` at every reset), a Scenario or its dict.
 ScenarioSpec = str | os.PathLike[str] | Scenario | Mapping[str, Any]
+#: Longest observation history [edges].
+MAX_HISTORY = 64
 
 
 @dataclass(frozen=True)
@@ -63,7 +82,22 @@ class SoaringEnvConfig:
         ``progress_weight * (d_before - d_after) / 1 km`` with ``d`` the 3-D distance to the goal
         centre; it telescopes, so it changes no optimal policy (gamma = 1). 0 switches it off.
     :param render_size: (width, height) of ``rgb_array`` frames [px].
+    :param envelope: continuous envs: ``"paper"`` (default: the primitives' envelope, turn rates
+        +-1080 deg / Ts) or ``"physical"`` (airspeed, bank-angle and stall limits, independent of
+        Ts: :meth:`~soaring_env.primitives.ControlEnvelope.physical`); an aircraft with a stall
+        limit (``cl_max``) needs ``"physical"``.
+    :param airspeed_range: ``"physical"`` envelope: (low, high) airspeed [m/s].
+    :param gamma_range_deg: ``"physical"`` envelope: (low, high) flight-path angle [deg].
+    :param history_length: number H of past edges in the observation (each: mean lift, climb rate,
+        course change); 0 (default) adds none.
+    :param sensor_noise: standard deviation [m/s] of Gaussian noise on the sensed lift entries
+        (``updraft``, ``edge_lift``, the history's lift), drawn from the episode's seed; 0: exact.
+    :param time_limit: flight time [s] after which an episode is truncated by the env itself, or
+        ``None`` (default: the registered ``max_episode_steps`` truncates); at least one step (Ts).
     """
+
+    #: the random-scenario generator of ``"random"`` mode and ``random_scenario`` (a task's own)
+    generator: ClassVar[Callable[..., Scenario]] = staticmethod(make_scenario)
 
     scenario: ScenarioSpec = "paper"
     random_scenario: Mapping[str, Any] = dataclasses.field(default_factory=dict)
@@ -84,6 +118,12 @@ class SoaringEnvConfig:
     out_of_bounds_penalty: float = 25.0
     progress_weight: float = 1.0
     render_size: tuple[int, int] = (960, 640)
+    envelope: str = "paper"
+    airspeed_range: tuple[float, float] = (12.0, 25.0)
+    gamma_range_deg: tuple[float, float] = (-30.0, 20.0)
+    history_length: int = 0
+    sensor_noise: float = 0.0
+    time_limit: float | None = None
 
     def __post_init__(self) -> None:
         if isinstance(self.scenario, os.PathLike):
@@ -93,14 +133,9 @@ class SoaringEnvConfig:
                 f"scenario={self.scenario!r} has type {type(self.scenario).__name__}; "
                 "allowed: a scenario name or path, 'random', a Scenario or a dict"
             )
-        if not isinstance(self.random_scenario, Mapping):
-            raise ConfigError(f"random_scenario={self.random_scenario!r} must be a dict of make_scenario keywords")
-        allowed = [p for p in inspect.signature(make_scenario).parameters if p != "rng"]
-        unknown = sorted(set(self.random_scenario) - set(allowed))
-        if unknown:
-            raise ConfigError(f"random_scenario has unknown key(s) {unknown!r}; allowed: {', '.join(allowed)}")
+        check_generator_keywords(self.generator, self.random_scenario)
         if self.scenario == RANDOM or self.random_scenario:
-            make_scenario(np.random.default_rng(0), **dict(self.random_scenario))  # fail early on bad ranges
+            self.generator(np.random.default_rng(0), **dict(self.random_scenario))  # fail early on bad ranges
         object.__setattr__(self, "duration", check_duration("duration", self.duration))
         check_int("n_points", self.n_points, 2, MAX_POINTS)
         if not isinstance(self.aircraft, Aircraft):
@@ -120,8 +155,17 @@ class SoaringEnvConfig:
         if len(size) != 2 or any(isinstance(s, bool) or not isinstance(s, int) or s < 64 for s in size):
             raise ConfigError(f"render_size={self.render_size!r} must be (width, height) in pixels, each >= 64")
         object.__setattr__(self, "render_size", size)
+        check_type("envelope", self.envelope, str)
+        check_choice("envelope", self.envelope, ENVELOPES)
+        for name in ("airspeed_range", "gamma_range_deg"):
+            object.__setattr__(self, name, check_pair(name, getattr(self, name), -100.0, 100.0))
+        check_int("history_length", self.history_length, 0, MAX_HISTORY)
+        object.__setattr__(self, "sensor_noise", check_range("sensor_noise", self.sensor_noise, 0.0, 10.0))
+        if self.time_limit is not None:
+            tl = check_range("time_limit", self.time_limit, self.duration, 1e7)
+            object.__setattr__(self, "time_limit", tl)
         # Fail early on an unknown name, a bad file or pinned scenario, or bad random-scenario keywords.
-        resolve_scenario(self.scenario, self.random_scenario)
+        resolve_scenario(self.scenario, self.random_scenario, self.generator)
 
     @classmethod
     def field_names(cls) -> tuple[str, ...]:
@@ -137,27 +181,43 @@ class SoaringEnvConfig:
         return dataclasses.replace(self, **changes)
 
 
-def make_config(config: SoaringEnvConfig | Mapping[str, Any] | None, overrides: Mapping[str, Any]) -> SoaringEnvConfig:
-    """Combine a config (or a dict of fields, or None for defaults) with keyword overrides."""
+def make_config(
+    config: SoaringEnvConfig | Mapping[str, Any] | None,
+    overrides: Mapping[str, Any],
+    cls: type[SoaringEnvConfig] = SoaringEnvConfig,
+) -> SoaringEnvConfig:
+    """Combine a config of class ``cls`` (or a dict of its fields, or None for its defaults) with
+    keyword overrides."""
     if config is None:
-        base = SoaringEnvConfig()
+        base = cls()
     elif isinstance(config, SoaringEnvConfig):
+        if type(config) is not cls:
+            raise ConfigError(f"config has type {type(config).__name__}; this env takes a {cls.__name__}")
         base = config
     elif isinstance(config, Mapping):
-        base = SoaringEnvConfig().replace(**dict(config))
+        base = cls().replace(**dict(config))
     else:
-        raise ConfigError(f"config={config!r} must be a SoaringEnvConfig, a dict of its fields or None")
+        raise ConfigError(f"config={config!r} must be a {cls.__name__}, a dict of its fields or None")
     return base.replace(**dict(overrides)) if overrides else base
 
 
-def resolve_scenario(spec: ScenarioSpec, random_kwargs: Mapping[str, Any] | None = None) -> Scenario | None:
+def resolve_scenario(
+    spec: ScenarioSpec,
+    random_kwargs: Mapping[str, Any] | None = None,
+    generator: Callable[..., Scenario] = make_scenario,
+) -> Scenario | None:
     """A :class:`Scenario` from a Scenario, a dict, or a name or path of
-    :func:`~soaring_env.scenario.get_scenario` (``random_kwargs`` for ``"random-<seed>"``);
-    ``None`` for ``"random"``."""
+    :func:`~soaring_env.scenario.get_scenario`; ``None`` for ``"random"``. ``random_kwargs`` (the
+    keywords of ``generator``, an env's ``random_scenario``) apply to ``<family>-<seed>`` names of
+    that generator's family only."""
     if isinstance(spec, Scenario):
         return spec
     if isinstance(spec, (str, os.PathLike)):
-        return None if spec == RANDOM else get_scenario(spec, random_kwargs)
+        if spec == RANDOM:
+            return None
+        family = scenario_family(spec)
+        own = family is not None and GENERATORS[family] is generator
+        return get_scenario(spec, random_kwargs if own else None)
     if isinstance(spec, Mapping):
         return Scenario.from_dict(dict(spec))
     raise ConfigError(f"scenario={spec!r} is invalid; allowed: a scenario name or path, 'random', a Scenario or a dict")
@@ -168,13 +228,14 @@ def choose_scenario(
     fixed: Scenario | None,
     random_kwargs: Mapping[str, Any],
     rng: Callable[[], np.random.Generator],
+    generator: Callable[..., Scenario] = make_scenario,
 ) -> Scenario:
     """The scenario of a new episode.
 
     ``options["scenario"]`` (anything :class:`SoaringEnvConfig` takes as ``scenario``) wins; else
     the configured ``fixed`` scenario; else (``"random"`` mode) a scenario drawn from ``rng()`` with
-    :func:`~soaring_env.scenario.make_scenario` and ``random_kwargs`` (also the keywords of
-    ``"random-<seed>"`` names).
+    ``generator`` (default :func:`~soaring_env.scenario.make_scenario`) and ``random_kwargs``
+    (also the keywords of that generator's ``<family>-<seed>`` names).
     """
     spec: Any = None
     if options:
@@ -185,9 +246,9 @@ def choose_scenario(
             raise ConfigError(f"unknown reset option(s) {unknown!r}; allowed: 'scenario'")
         spec = options.get("scenario")
     if spec is not None:
-        pinned = resolve_scenario(spec, random_kwargs)  # None for "random"
+        pinned = resolve_scenario(spec, random_kwargs, generator)  # None for "random"
         if pinned is not None:
             return pinned
     elif fixed is not None:
         return fixed
-    return make_scenario(rng(), **dict(random_kwargs))
+    return generator(rng(), **dict(random_kwargs))

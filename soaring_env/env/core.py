@@ -18,11 +18,19 @@ from gymnasium import spaces
 from soaring_env._validation import ConfigError
 from soaring_env.env._kernels import CRASH, FLYING, GOAL, OUT_OF_BOUNDS, post_step
 from soaring_env.env.config import ENERGY_SCALE, SoaringEnvConfig, choose_scenario, make_config, resolve_scenario
-from soaring_env.env.observation import observation_layout, observe_batch, scenario_params
-from soaring_env.model import OUTCOMES, SoaringModel
+from soaring_env.env.observation import (
+    HISTORY_FEATURES,
+    N_BASE,
+    N_GOAL,
+    observation_layout,
+    observe_batch,
+    scenario_params,
+    sensor_noise,
+)
+from soaring_env.model import BATTERY_EMPTY, OUTCOMES, SoaringModel
 from soaring_env.physics.thermals import WindField
-from soaring_env.primitives import N_PRIMITIVES, PrimitiveLibrary
-from soaring_env.scenario import Scenario, get_scenario
+from soaring_env.primitives import N_PRIMITIVES, ControlEnvelope, PrimitiveLibrary
+from soaring_env.scenario import Scenario, get_scenario, make_scenario
 
 if TYPE_CHECKING:  # pragma: no cover - matplotlib is imported only when an env renders
     from soaring_env.env.rendering import Renderer
@@ -173,6 +181,14 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
 
     metadata: dict[str, Any] = {"render_modes": ["human", "rgb_array"], "render_fps": 4}  # noqa: RUF012
     continuous: ClassVar[bool] = False
+    #: the task's config class (its defaults and extra fields)
+    config_class: ClassVar[type[SoaringEnvConfig]] = SoaringEnvConfig
+    #: whether the task has a goal region (goal entries, progress shaping, the goal bonus)
+    has_goal: ClassVar[bool] = True
+    #: whether the task's motor runs on a battery (:meth:`battery_budget`; outcome "battery_empty")
+    has_battery: ClassVar[bool] = False
+    #: the task's extra observation entries (keys of observation.TASK_FEATURES)
+    task_extras: ClassVar[tuple[str, ...]] = ()
 
     def __init__(
         self,
@@ -180,7 +196,7 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         render_mode: str | None = None,
         **overrides: Any,
     ) -> None:
-        cfg = make_config(config, overrides)
+        cfg = make_config(config, overrides, self.config_class)
         self.config = cfg
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ConfigError(
@@ -189,8 +205,37 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
             )
         self.render_mode = render_mode
         self.library = PrimitiveLibrary(duration=cfg.duration, n_points=cfg.n_points)
-        self._fixed_scenario = resolve_scenario(cfg.scenario, cfg.random_scenario)
-        names, low, high = observation_layout(cfg.observe_thermals, cfg.n_obs_thermals)
+        self._fixed_scenario = resolve_scenario(cfg.scenario, cfg.random_scenario, cfg.generator)
+        first = self._fixed_scenario or self._placeholder_scenario()
+        if self.continuous and cfg.aircraft.cl_max is not None and cfg.envelope == "paper":
+            raise ConfigError(
+                f"aircraft.cl_max={cfg.aircraft.cl_max!r} with envelope='paper': the paper's envelope flies 10 m/s "
+                "spirals far past any stall limit; allowed: envelope='physical' (or cl_max=None)"
+            )
+        #: the continuous envelope (None: the paper's), evaluated at the first scenario's ceiling
+        self.envelope: ControlEnvelope | None = (
+            None
+            if cfg.envelope == "paper"
+            else ControlEnvelope.physical(
+                cfg.aircraft,
+                max_bank_deg=cfg.max_bank_deg,
+                height_max=first.bounds.height_max,
+                airspeed=cfg.airspeed_range,
+                gamma_deg=cfg.gamma_range_deg,
+            )
+        )
+        self._extras = self.task_extras + (("time_left",) if cfg.time_limit is not None else ())
+        self._hist_len = cfg.history_length
+        names, low, high = observation_layout(
+            cfg.observe_thermals, cfg.n_obs_thermals, goal=self.has_goal, extras=self._extras, history=self._hist_len
+        )
+        #: where the task's entries, the history and the thermal slots start in the observation
+        self._extra_base = N_BASE if self.has_goal else N_BASE - N_GOAL
+        self._hist_base = self._extra_base + len(self._extras)
+        self._th_base = self._hist_base + len(HISTORY_FEATURES) * self._hist_len
+        self._goal_on = int(self.has_goal)
+        self._noise_sigma = float(cfg.sensor_noise)
+        self._time_limit = math.inf if cfg.time_limit is None else float(cfg.time_limit)
         self.observation_names: list[str] = names
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
         self._n_obs = len(names)
@@ -203,11 +248,10 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         self._ts = float(self.library.duration)
         self._dt = self.library.duration / self.library.n_points
         self._w_progress = float(cfg.progress_weight)
-        # Terminal reward terms indexed by the edge outcome code (FLYING, GOAL, CRASH, OUT_OF_BOUNDS).
+        # Terminal reward terms indexed by the outcome code (FLYING, GOAL, CRASH, OUT_OF_BOUNDS, BATTERY_EMPTY).
         self._terminal = {
-            "goal": np.array([0.0, float(cfg.goal_bonus), 0.0, 0.0]),
-            "crash": np.array([0.0, 0.0, -float(cfg.crash_penalty), 0.0]),
-            "out_of_bounds": np.array([0.0, 0.0, 0.0, -float(cfg.out_of_bounds_penalty)]),
+            name: np.array([value if code == c else 0.0 for c in range(len(OUTCOMES))])
+            for name, code, value in self._terminal_terms()
         }
         # scratch buffers of the hot path (copied into Python floats before step returns)
         self._t0 = np.zeros(1)
@@ -220,7 +264,10 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         self._dist = np.zeros(1)
         self._ctrl = np.zeros((1, 4))
         self._x0 = np.zeros((1, 4))
-        self.scenario: Scenario = self._fixed_scenario or get_scenario("paper")
+        self._noise = np.zeros((1, 2))
+        self._noise_key = np.zeros(1, dtype=np.uint64)
+        self._history = np.zeros((1, self._hist_len, len(HISTORY_FEATURES)))
+        self.scenario: Scenario = first
         self._install(self.scenario)
         self._start_episode()
         self._needs_reset = True
@@ -241,16 +288,76 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
     def _make_action_space(self) -> spaces.Space:
         raise NotImplementedError
 
+    # --- task hooks (overridden by the tasks of soaring_env.env.tasks) ---------------------------
+    def _placeholder_scenario(self) -> Scenario:
+        """The scenario before the first reset in ``"random"`` mode: ``"paper"`` for goal reaching,
+        a task's draw of seed 0 (``<family>-0``) for the others."""
+        cfg = self.config
+        if cfg.generator is make_scenario:
+            return get_scenario("paper")
+        return cfg.generator(np.random.default_rng(0), **dict(cfg.random_scenario))
+
+    def _terminal_terms(self) -> list[tuple[str, int, float]]:
+        """(reward-term name, outcome code, value) of the terminal rewards."""
+        cfg = self.config
+        return [
+            ("goal", GOAL, float(cfg.goal_bonus)),
+            ("crash", CRASH, -float(cfg.crash_penalty)),
+            ("out_of_bounds", OUT_OF_BOUNDS, -float(cfg.out_of_bounds_penalty)),
+        ]
+
+    def battery_budget(self, scenario: Scenario) -> float:
+        """The motor energy [J/kg] an episode in ``scenario`` may spend (inf: no battery limit)."""
+        return math.inf
+
+    def _fill_task_entries(
+        self,
+        obs: np.ndarray,
+        rows: np.ndarray,
+        times: np.ndarray,
+        battery_left: np.ndarray,
+        budget: np.ndarray,
+        history: np.ndarray,
+    ) -> None:
+        """Write the task's extra entries and the ``history`` (B, H, 3) of envs ``rows`` into ``obs``
+        (batched: the single env passes one row, the vector env all of its own)."""
+        i = self._extra_base
+        for key in self._extras:
+            if key == "battery":
+                v = battery_left[rows] / budget[rows]
+            else:  # time_left
+                v = np.maximum(self._time_limit - times[rows], 0.0) / self._time_limit
+            obs[rows, i] = np.clip(v, 0.0, 1.0)
+            i += 1
+        if self._hist_len:
+            lo = self._low[self._hist_base : self._th_base]
+            hi = self._high[self._hist_base : self._th_base]
+            obs[rows, self._hist_base : self._th_base] = np.clip(history[rows].reshape(len(rows), -1), lo, hi)
+
+    def _push_history(
+        self, history: np.ndarray, lift: np.ndarray, dh: np.ndarray, dchi: np.ndarray, flown: np.ndarray
+    ) -> None:
+        """Shift ``history`` (B, H, 3) and put the last edge first: mean (sensed) lift and climb rate
+        over the flown time ``flown`` [s] (scaled like the updraft), course change / pi."""
+        if not self._hist_len:
+            return
+        h = history
+        rows = slice(None)
+        h[rows, 1:] = h[rows, :-1]
+        us = self.config.updraft_scale
+        h[rows, 0, 0] = lift / us
+        h[rows, 0, 1] = dh / flown / us
+        h[rows, 0, 2] = (dchi + math.pi) % (2.0 * math.pi) / math.pi - 1.0
+
     def reward_terms(self, cost, d_prev, d_new, code) -> dict[str, Any]:
         """The reward terms of an edge -- floats for one edge, arrays for a batch (the vector env).
 
         ``energy = -cost / 1000`` (cost in J/kg), ``progress = w (d_prev - d_new) / 1000`` (goal
         distances in m), and the terminal terms of the outcome ``code``; the reward is their sum.
         """
-        terms = {
-            "energy": -cost / ENERGY_SCALE,
-            "progress": self._w_progress * (d_prev - d_new) / PROGRESS_SCALE,
-        }
+        terms = {"energy": -cost / ENERGY_SCALE}
+        if self.has_goal:
+            terms["progress"] = self._w_progress * (d_prev - d_new) / PROGRESS_SCALE
         for key, by_code in self._terminal.items():
             terms[key] = by_code[code]
         return terms
@@ -266,12 +373,13 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
             library=self.library,
             max_substep=cfg.max_substep,
             max_bank_deg=cfg.max_bank_deg,
+            envelope=self.envelope,
         )
         self._prop = self.model.propagator
         self._prm = scenario_params(sc)[None, :]
         self._th = np.ascontiguousarray(sc.field.packed[None, :, :])
         self._nth = np.array([len(sc.field.thermals)], dtype=np.int64)
-        self._bank_ok = self.model.bank_ok()
+        self._allowed = self.model.allowed_primitives()
 
     def _start_episode(self) -> tuple[np.ndarray, dict[str, Any]]:
         sc = self.scenario
@@ -282,6 +390,12 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         self.steps = 0
         self.outcome = "flying"
         self._lift[0] = 0.0
+        self.battery = self.battery_budget(sc)
+        self.battery_left = self.battery
+        self._history[:] = 0.0
+        if self._noise_sigma:
+            self._noise_key[0] = self.np_random.integers(0, 2**63, dtype=np.uint64)
+            self._noise[:] = sensor_noise(self._noise_key, np.zeros(1, dtype=np.uint64), self._noise_sigma)
         obs = np.empty((1, self._n_obs), dtype=np.float32)
         observe_batch(
             self.state[None, :],
@@ -295,10 +409,16 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
             self._k_obs,
             self._low,
             self._high,
+            self._goal_on,
+            self._th_base,
+            self._noise,
             _ZERO_ROW,
             self._upd,
             self._dist,
             obs,
+        )
+        self._fill_task_entries(
+            obs, _ZERO_ROW, np.zeros(1), np.array([self.battery_left]), np.array([self.battery]), self._history
         )
         self._d_goal = float(self._dist[0])
         self.updraft = float(self._upd[0])
@@ -327,7 +447,8 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
         """Start an episode; ``options={"scenario": Scenario | name | dict | "random"}`` pins a scenario."""
         super().reset(seed=seed)
-        sc = choose_scenario(options, self._fixed_scenario, self.config.random_scenario, lambda: self.np_random)
+        cfg = self.config
+        sc = choose_scenario(options, self._fixed_scenario, cfg.random_scenario, lambda: self.np_random, cfg.generator)
         if sc is not self.scenario:
             self._install(sc)
         obs, info = self._start_episode()
@@ -350,6 +471,10 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         self._tn[0] = t_new
         obs = np.empty((1, self._n_obs), dtype=np.float32)
         new_state = np.empty((1, 4))
+        if self._noise_sigma:
+            self._noise[:] = sensor_noise(
+                self._noise_key, np.array([self.steps + 1], dtype=np.uint64), self._noise_sigma
+            )
         post_step(
             out,
             x0,
@@ -363,6 +488,9 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
             self._k_obs,
             self._low,
             self._high,
+            self._goal_on,
+            self._th_base,
+            self._noise,
             self._codes,
             self._ks,
             new_state,
@@ -374,6 +502,20 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         code = int(self._codes[0])
         k = int(self._ks[0])
         fuel, potential, kinetic, cost, bank, _ = terms[0].tolist()
+        self.battery_left -= fuel + kinetic
+        if code == FLYING and self.battery_left <= 0.0:
+            code = BATTERY_EMPTY
+        if self._extras or self._hist_len:
+            self._push_history(
+                self._history,
+                self._lift + self._noise[:, 1],
+                new_state[:, 3] - x0[:, 3],
+                new_state[:, 2] - x0[:, 2],
+                np.array([(k + 1) * self._dt]),
+            )
+            self._fill_task_entries(
+                obs, _ZERO_ROW, self._tn, np.array([self.battery_left]), np.array([self.battery]), self._history
+            )
         airspeed = float(ctrl[0, 0])
         d_new = float(self._dist[0])
         updraft = float(self._upd[0])
@@ -389,7 +531,8 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         reward = sum(reward_terms.values())
         self._d_goal = d_new
         terminated = code != FLYING
-        self._needs_reset = terminated
+        truncated = not terminated and t_new >= self._time_limit - 1e-9
+        self._needs_reset = terminated or truncated
         h = float(new_state[0, 3])
         self._path.append(out[0, : k + 1])
         hist = self.history
@@ -412,9 +555,11 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
             "is_success": code == GOAL,
             "reward_terms": reward_terms,
         }
+        if self.has_battery:
+            info["battery_left"] = self.battery_left
         if self.render_mode == "human":
             self.render()
-        return obs[0], reward, terminated, False, info
+        return obs[0], reward, terminated, truncated, info
 
     # --- rendering -----------------------------------------------------------------------------------
     def render(self) -> np.ndarray | None:
@@ -483,9 +628,9 @@ class SoaringEnv(SoaringBaseEnv):
         m = self.model
         r = m.rollout_primitive(self.state, np.arange(N_PRIMITIVES), t0=self.time, airspeed_prev=self.airspeed_prev)
         code, k = m.classify(r)
-        valid = (code != CRASH) & (code != OUT_OF_BOUNDS) & self._bank_ok
+        valid = (code != CRASH) & (code != OUT_OF_BOUNDS) & self._allowed
         if not valid.any():
-            kk = np.where(self._bank_ok, k, -1)
+            kk = np.where(self._allowed, k, -1)
             valid = kk == kk.max()
         return valid
 
@@ -499,9 +644,11 @@ class SoaringContinuousEnv(SoaringBaseEnv):
 
     def _install(self, sc: Scenario) -> None:
         super()._install(sc)
-        lo, hi = self.library.control_bounds()
+        env = self.model.control_envelope
+        lo, hi = env.bounds()
         self._c_lo = lo.tolist()
         self._c_span = (hi - lo).tolist()
+        self._affine = env.kind == "paper"  # the paper's box: the scalar fast path below
 
     def action_to_control(self, action: Any) -> tuple[float, float, float]:
         """Validate a normalized action and map it like ``model.action_to_control`` (same floats):
@@ -518,6 +665,9 @@ class SoaringContinuousEnv(SoaringBaseEnv):
                 f"action={a.tolist()!r} is outside the action space; allowed: finite values in [-1, 1] "
                 "for (v_a, chi_dot, gamma)"
             )
+        if not self._affine:
+            v, chi_dot, gamma = self.model.control_envelope.to_control(a).tolist()
+            return v, chi_dot, gamma
         lo, sp = self._c_lo, self._c_span
         return (
             lo[0] + 0.5 * (a0 + 1.0) * sp[0],

@@ -74,9 +74,31 @@ N_PARAMS = 15
 assert (P_WN, P_DVY) == (N_CLASSIFY_PARAMS + FP_WIND_NORTH, N_CLASSIFY_PARAMS + FP_DRIFT_EAST)  # field_params
 
 
-def observation_layout(observe_thermals: bool, n_thermals: int) -> tuple[list[str], np.ndarray, np.ndarray]:
-    """Names, lower and upper bounds (float32) of the observation vector."""
-    feats = list(BASE_FEATURES)
+#: Entries a task may add between the base entries and the thermal slots (name, low, high).
+TASK_FEATURES = {
+    "battery": ("battery", 0.0, 1.0),  # battery left / budget
+    "time_left": ("time_left", 0.0, 1.0),  # flight time left / time limit
+}
+HISTORY_FEATURES = (("lift", -4.0, 4.0), ("climb", -4.0, 4.0), ("turn", -1.0, 1.0))
+N_GOAL = 3  # the goal entries lead the base entries
+
+
+def observation_layout(
+    observe_thermals: bool,
+    n_thermals: int,
+    *,
+    goal: bool = True,
+    extras: tuple[str, ...] = (),
+    history: int = 0,
+) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """Names, lower and upper bounds (float32) of the observation vector: the base entries (without
+    the three goal entries for tasks without a goal), the task's ``extras`` (keys of
+    :data:`TASK_FEATURES`), ``history`` x (lift, climb, turn) of the last edges (newest first),
+    then the thermal slots."""
+    feats = list(BASE_FEATURES if goal else BASE_FEATURES[N_GOAL:])
+    feats += [TASK_FEATURES[k] for k in extras]
+    for j in range(history):
+        feats += [(f"history_{j}_{name}", lo, hi) for name, lo, hi in HISTORY_FEATURES]
     if observe_thermals:
         for j in range(n_thermals):
             feats += [(f"thermal_{j}_{name}", lo, hi) for name, lo, hi in THERMAL_FEATURES]
@@ -126,12 +148,18 @@ def observe_row(
     k_obs: int,
     low: np.ndarray,
     high: np.ndarray,
+    goal_on: int,
+    th_base: int,
+    noise: np.ndarray,
     out: np.ndarray,
 ) -> float:
     """Fill one observation row ``out`` (float32) and return the updraft w_up [m/s] at the aircraft.
 
     ``th`` holds this scenario's thermals (WindField.packed rows), ``scales`` = (position, height,
-    updraft, speed, wind) scales, ``k_obs`` the number of thermal slots (0: thermals hidden).
+    updraft, speed, wind) scales, ``k_obs`` the number of thermal slots (0: thermals hidden),
+    ``goal_on`` 0 leaves out the goal entries, ``th_base`` is the index of the first thermal slot
+    and ``noise`` (2,) [m/s] is added to the sensed updraft and edge lift (not to the returned w).
+    The task's extra and history entries in between are the env's to fill.
     """
     ps = scales[0]
     hs = scales[1]
@@ -157,9 +185,17 @@ def observe_row(
         prm[P_WE] / wsc,
     )
     i = 0
+    skip = 0 if goal_on else N_GOAL
     for v in vals:
+        if skip > 0:
+            skip -= 1
+            continue
         out[i] = _clip(v, low[i], high[i])
         i += 1
+    if noise[0] != 0.0:
+        out[i - 5] = _clip((w + noise[0]) / us, low[i - 5], high[i - 5])
+    if noise[1] != 0.0:
+        out[i - 4] = _clip((lift + noise[1]) / us, low[i - 4], high[i - 4])
     if k_obs == 0:
         return w
     nth = th.shape[0]
@@ -172,7 +208,7 @@ def observe_row(
     prev_d2 = -1.0
     prev_j = -1
     for slot in range(k_obs):
-        base = N_BASE + N_THERMAL_FEATURES * slot
+        base = th_base + N_THERMAL_FEATURES * slot
         # The next nearest thermal in the order (d2, index) after the previous slot's one.
         best = -1
         best_d2 = 0.0
@@ -225,12 +261,16 @@ def observe_batch(
     k_obs: int,
     low: np.ndarray,
     high: np.ndarray,
+    goal_on: int,
+    th_base: int,
+    noise: np.ndarray,
     rows: np.ndarray,
     upd: np.ndarray,
     dist: np.ndarray,
     obs: np.ndarray,
 ) -> None:
-    """Observe envs ``rows``: fill ``obs[b]``, ``upd[b]`` [m/s] and ``dist[b]`` [m] for b in rows."""
+    """Observe envs ``rows``: fill ``obs[b]``, ``upd[b]`` [m/s] and ``dist[b]`` [m] for b in rows
+    (``noise`` (B, 2): see :func:`observe_row`)."""
     for b in rows:
         upd[b] = observe_row(
             states[b, 0],
@@ -246,6 +286,38 @@ def observe_batch(
             k_obs,
             low,
             high,
+            goal_on,
+            th_base,
+            noise[b],
             obs[b],
         )
         dist[b] = goal_distance(states[b, 0], states[b, 1], states[b, 3], prm[b])
+
+
+_U64 = np.uint64
+_MASK53 = 2.0**-53
+
+
+def _splitmix64(x: np.ndarray) -> np.ndarray:
+    """SplitMix64 finalizer (Steele, Lea, Flood 2014) on uint64 arrays (wrapping arithmetic)."""
+    x = x + _U64(0x9E3779B97F4A7C15)
+    x = (x ^ (x >> _U64(30))) * _U64(0xBF58476D1CE4E5B9)
+    x = (x ^ (x >> _U64(27))) * _U64(0x94D049BB133111EB)
+    return x ^ (x >> _U64(31))
+
+
+def sensor_noise(keys: np.ndarray, steps: np.ndarray, sigma: float) -> np.ndarray:
+    """(B, 2) Gaussian sensor noise [m/s] of standard deviation ``sigma`` for the updraft and the
+    edge-lift readings of step ``steps[b]`` of the episode with key ``keys[b]`` (uint64 arrays).
+
+    A counter-based generator (a hash of key and step, then Box-Muller): the noise of a step does
+    not depend on what else was drawn, so single and batched envs give the same numbers and an
+    episode replays bit for bit from its seed.
+    """
+    with np.errstate(over="ignore"):
+        x = _splitmix64(keys ^ _splitmix64(steps.astype(np.uint64)))
+        y = _splitmix64(x)
+    u1 = ((x >> _U64(11)).astype(np.float64) + 1.0) * _MASK53  # (0, 1]: the log is finite
+    u2 = (y >> _U64(11)).astype(np.float64) * _MASK53
+    r = sigma * np.sqrt(-2.0 * np.log(u1))
+    return np.stack([r * np.cos(2.0 * np.pi * u2), r * np.sin(2.0 * np.pi * u2)], axis=1)

@@ -167,9 +167,10 @@ class Renderer:
             ax.add_patch(Circle((ce / 1e3, cn / 1e3), r_core / 1e3, fill=False, ec="#7b1010", lw=0.8, ls="--"))
             ax.plot(ce / 1e3, cn / 1e3, marker="+", ms=9, mew=1.5, color="#7b1010")
             ax.annotate(f"T{j}", (ce / 1e3, cn / 1e3), xytext=(4, 4), textcoords="offset points", fontsize=7)
-        ax.add_patch(Circle((g.east / 1e3, g.north / 1e3), g.radius / 1e3, fc="#2ecc71", ec="#145a32", alpha=0.6))
-        ax.annotate("goal", (g.east / 1e3, g.north / 1e3), xytext=(0, -14), textcoords="offset points",
-                    ha="center", fontsize=8, color="#145a32", fontweight="bold")  # fmt: skip
+        if g is not None:
+            ax.add_patch(Circle((g.east / 1e3, g.north / 1e3), g.radius / 1e3, fc="#2ecc71", ec="#145a32", alpha=0.6))
+            ax.annotate("goal", (g.east / 1e3, g.north / 1e3), xytext=(0, -14), textcoords="offset points",
+                        ha="center", fontsize=8, color="#145a32", fontweight="bold")  # fmt: skip
         s0 = sc.start
         ax.plot(s0[1] / 1e3, s0[0] / 1e3, marker="o", ms=6, color="black")
         ax.annotate("start", (s0[1] / 1e3, s0[0] / 1e3), xytext=(0, -13), textcoords="offset points",
@@ -241,7 +242,8 @@ class Renderer:
         from matplotlib.patches import Circle
 
         g = env.scenario.goal
-        ins.add_patch(Circle((g.east - e0, g.north - n0), g.radius, fc="#2ecc71", ec="#145a32", alpha=0.5))
+        if g is not None:
+            ins.add_patch(Circle((g.east - e0, g.north - n0), g.radius, fc="#2ecc71", ec="#145a32", alpha=0.5))
         for tn, te in f.centres(env.time):
             ins.plot(te - e0, tn - n0, marker="+", ms=7, mew=1.2, color="#7b1010")
         ins.plot(path[:, 1] - e0, path[:, 0] - n0, color=colour, lw=1.0)
@@ -264,13 +266,14 @@ class Renderer:
         f = sc.field
         centres = f.centres(env.time)
         # Zoom on what matters: the path, the goal and the thermals, with a margin [km].
-        pts_e = np.concatenate([path[:, 1], [g.east], centres[:, 1]]) / 1e3
-        pts_n = np.concatenate([path[:, 0], [g.north], centres[:, 0]]) / 1e3
+        goal_e, goal_n = ([], []) if g is None else ([g.east], [g.north])
+        pts_e = np.concatenate([path[:, 1], goal_e, centres[:, 1]]) / 1e3
+        pts_n = np.concatenate([path[:, 0], goal_n, centres[:, 0]]) / 1e3
         half = 0.5 * max(np.ptp(pts_e), np.ptp(pts_n)) + 0.4
         ce, cn = 0.5 * (pts_e.min() + pts_e.max()), 0.5 * (pts_n.min() + pts_n.max())
         xlim = (max(ce - half, b.east_min / 1e3), min(ce + half, b.east_max / 1e3))
         ylim = (max(cn - half, b.north_min / 1e3), min(cn + half, b.north_max / 1e3))
-        zmax = max(float(path[:, 3].max()), g.height + g.radius, 100.0) * 1.1
+        zmax = max(float(path[:, 3].max()), 0.0 if g is None else g.height + g.radius, 100.0) * 1.1
         top = min(f.zi, zmax)
         theta = np.linspace(0.0, 2.0 * math.pi, 32)
         for j, (tn, te) in enumerate(centres):
@@ -280,15 +283,16 @@ class Renderer:
             ax.plot(xs, ys, np.full_like(theta, top), color="#c0392b", lw=0.8, alpha=0.6)
             ax.plot([te / 1e3] * 2, [tn / 1e3] * 2, [0.0, top], color="#c0392b", lw=2.5, alpha=0.5)
         u, v = np.meshgrid(np.linspace(0, 2 * math.pi, 16), np.linspace(0, math.pi, 9))
-        rk = g.radius / 1e3
-        ax.plot_surface(
-            g.east / 1e3 + rk * np.cos(u) * np.sin(v),
-            g.north / 1e3 + rk * np.sin(u) * np.sin(v),
-            g.height + g.radius * np.cos(v),
-            color="#2ecc71",
-            alpha=0.45,
-            linewidth=0,
-        )
+        if g is not None:
+            rk = g.radius / 1e3
+            ax.plot_surface(
+                g.east / 1e3 + rk * np.cos(u) * np.sin(v),
+                g.north / 1e3 + rk * np.sin(u) * np.sin(v),
+                g.height + g.radius * np.cos(v),
+                color="#2ecc71",
+                alpha=0.45,
+                linewidth=0,
+            )
         pe, pn, ph = path[:, 1] / 1e3, path[:, 0] / 1e3, path[:, 3]
         ax.plot(pe, pn, np.zeros(len(path)), color="0.35", lw=1.0, ls="--")
         ax.plot(pe, pn, ph, color=colour, lw=1.8)
@@ -312,7 +316,8 @@ class Renderer:
         t = np.asarray(hist["time"]) / 60.0
         ax.plot(t, hist["height"], marker="o", ms=3, color="#1f3b73", label="height")
         g = env.scenario.goal
-        ax.axhspan(g.height - g.radius, g.height + g.radius, color="#2ecc71", alpha=0.25, label="goal band")
+        if g is not None:
+            ax.axhspan(g.height - g.radius, g.height + g.radius, color="#2ecc71", alpha=0.25, label="goal band")
         ax.axhline(0.0, color="#7f4f24", lw=2)
         ax.set_xlabel("time [min]", fontsize=8)
         ax.set_ylabel("height [m]", fontsize=8)

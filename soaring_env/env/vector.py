@@ -39,15 +39,15 @@ from soaring_env.env._kernels import (
 )
 from soaring_env.env.config import SoaringEnvConfig, choose_scenario
 from soaring_env.env.core import SoaringBaseEnv, SoaringContinuousEnv, SoaringEnv
-from soaring_env.env.observation import N_PARAMS, P_WN, observe_batch, scenario_params
-from soaring_env.model import OUTCOMES, SoaringModel
+from soaring_env.env.observation import N_PARAMS, P_WN, observe_batch, scenario_params, sensor_noise
+from soaring_env.model import BATTERY_EMPTY, OUTCOMES, SoaringModel
 from soaring_env.physics.thermals import PACKED_COLUMNS
 from soaring_env.primitives import N_PRIMITIVES
 from soaring_env.scenario import Scenario
 
 _OUTCOMES_OBJ = np.array(OUTCOMES, dtype=object)
 #: info keys of a step that a reset info does not have
-_STEP_ONLY = ("edge_cost", "fuel", "potential", "kinetic", "airspeed", "bank_angle", "reward_terms")
+_STEP_ONLY = ("edge_cost", "fuel", "potential", "kinetic", "airspeed", "bank_angle", "battery_left", "reward_terms")
 
 
 class _SoaringVectorBase(VectorEnv):
@@ -70,11 +70,13 @@ class _SoaringVectorBase(VectorEnv):
 
     metadata: dict[str, Any] = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}  # noqa: RUF012
     single_env_class: ClassVar[type[SoaringBaseEnv]] = SoaringEnv
+    #: the registered step limit of the goal-reaching ids (the tasks truncate by their time_limit)
+    default_max_episode_steps: ClassVar[int | None] = 40
 
     def __init__(
         self,
         num_envs: int = 1,
-        max_episode_steps: int | None = 40,
+        max_episode_steps: int | str | None = "default",
         render_mode: str | None = None,
         config: SoaringEnvConfig | dict[str, Any] | None = None,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
@@ -87,7 +89,13 @@ class _SoaringVectorBase(VectorEnv):
                 f"render_mode={render_mode!r}: the native vector env does not render; allowed: None "
                 "(use vectorization_mode='sync' or a single env to render)"
             )
-        if max_episode_steps is not None and (isinstance(max_episode_steps, bool) or max_episode_steps < 1):
+        if max_episode_steps == "default":
+            max_episode_steps = self.default_max_episode_steps
+        if max_episode_steps is not None and (
+            isinstance(max_episode_steps, (bool, str))
+            or not isinstance(max_episode_steps, (int, np.integer))
+            or max_episode_steps < 1
+        ):
             raise ConfigError(f"max_episode_steps={max_episode_steps!r} must be an integer >= 1 or None")
         try:
             mode = AutoresetMode(autoreset_mode)
@@ -136,11 +144,15 @@ class _SoaringVectorBase(VectorEnv):
         self.models: list[SoaringModel] = [tmpl.model] * b
         #: model per scenario in use, by id(scenario); the model keeps the scenario alive
         self._models: dict[int, SoaringModel] = {id(tmpl.scenario): tmpl.model}
-        self._bank_ok = tmpl.model.bank_ok()
-        self._lo, hi = tmpl.library.control_bounds()
-        self._span = hi - self._lo
+        self._allowed = tmpl.model.allowed_primitives()
+        self._envelope = tmpl.model.control_envelope
         self._needs_reset = True
         self._obs_last = np.zeros((b, self._n_obs), dtype=np.float32)
+        self.battery = np.full(b, np.inf)
+        self.battery_left = np.full(b, np.inf)
+        self._noise = np.zeros((b, 2))
+        self._noise_key = np.zeros(b, dtype=np.uint64)
+        self._history = np.zeros((b, tmpl._hist_len, 3))
 
     # --- scenario bookkeeping ------------------------------------------------------------------------
     def _rng(self, i: int) -> np.random.Generator:
@@ -160,6 +172,7 @@ class _SoaringVectorBase(VectorEnv):
                 library=t.library,
                 max_substep=t.config.max_substep,
                 max_bank_deg=t.config.max_bank_deg,
+                envelope=t.envelope,
             )
             self._models[id(sc)] = model
         return model
@@ -178,8 +191,9 @@ class _SoaringVectorBase(VectorEnv):
                     self.scenarios[i] = fixed
                     self.models[i] = self._models[id(fixed)]
         else:
+            cfg = t.config
             chosen = [
-                choose_scenario(options, fixed, t.config.random_scenario, functools.partial(self._rng, i))
+                choose_scenario(options, fixed, cfg.random_scenario, functools.partial(self._rng, i), cfg.generator)
                 for i in row_list
             ]
             by_sc: dict[int, list[int]] = {}
@@ -201,6 +215,15 @@ class _SoaringVectorBase(VectorEnv):
             self._th[idx, :n] = sc.field.packed
             self._nth[idx] = n
             self.states[idx] = sc.start_state
+            self.battery[idx] = t.battery_budget(sc)
+        self.battery_left[rows] = self.battery[rows]
+        self._history[rows] = 0.0
+        if t._noise_sigma:  # after the scenario draws, as the single env draws its key
+            for i in row_list:
+                self._noise_key[i] = self._rng(i).integers(0, 2**63, dtype=np.uint64)
+            self._noise[rows] = sensor_noise(
+                self._noise_key[rows], np.zeros(len(rows), dtype=np.uint64), t._noise_sigma
+            )
         self.times[rows] = 0.0
         self.airspeed_prev[rows] = np.nan
         self.energy_spent[rows] = 0.0
@@ -218,11 +241,16 @@ class _SoaringVectorBase(VectorEnv):
             t._k_obs,
             t._low,
             t._high,
+            t._goal_on,
+            t._th_base,
+            self._noise,
             rows,
             self._upd,
             self._dist,
             obs,
         )
+        if t._extras or t._hist_len:
+            t._fill_task_entries(obs, rows, self.times, self.battery_left, self.battery, self._history)
         self._d_goal[rows] = self._dist[rows]
         if len(self._models) > 4 * self.num_envs:  # forget models of scenarios no env uses
             live = {id(sc) for sc in self.scenarios}
@@ -313,7 +341,7 @@ class _SoaringVectorBase(VectorEnv):
             a64 = a.astype(np.float64)
             if not (np.all(a64 >= -1.0) and np.all(a64 <= 1.0)):
                 raise ConfigError("actions contain values outside [-1, 1] or non-finite values; allowed: [-1, 1]")
-            u = self._lo + 0.5 * (a64 + 1.0) * self._span
+            u = self._envelope.to_control(a64)
             return np.ascontiguousarray(u[:, [0, 2, 1, 1]])
         if a.shape != (b,) or a.dtype.kind not in "iu":
             raise ConfigError(
@@ -345,6 +373,8 @@ class _SoaringVectorBase(VectorEnv):
         new_states = np.empty((b, 4))
         codes = np.empty(b, dtype=np.int64)
         ks = np.empty(b, dtype=np.int64)
+        if t._noise_sigma:
+            self._noise[:] = sensor_noise(self._noise_key, (self.steps + 1).astype(np.uint64), t._noise_sigma)
         post_step(
             out,
             self.states,
@@ -358,6 +388,9 @@ class _SoaringVectorBase(VectorEnv):
             t._k_obs,
             t._low,
             t._high,
+            t._goal_on,
+            t._th_base,
+            self._noise,
             codes,
             ks,
             new_states,
@@ -367,6 +400,15 @@ class _SoaringVectorBase(VectorEnv):
             obs,
         )
         cost = terms[:, 3].copy()
+        self.battery_left = self.battery_left - (terms[:, 0] + terms[:, 2])
+        codes[(codes == FLYING) & (self.battery_left <= 0.0)] = BATTERY_EMPTY
+        if t._extras or t._hist_len:
+            flown = (ks + 1) * t._dt
+            lift = self._lift + self._noise[:, 1]
+            t._push_history(
+                self._history, lift, new_states[:, 3] - self.states[:, 3], new_states[:, 2] - self.states[:, 2], flown
+            )
+            t._fill_task_entries(obs, self._env_index, t_new, self.battery_left, self.battery, self._history)
         airspeed = ctrl[:, 0].copy()
         d_new = self._dist.copy()
         reward_terms = t.reward_terms(cost, self._d_goal, d_new, codes)
@@ -382,6 +424,8 @@ class _SoaringVectorBase(VectorEnv):
             truncated = np.zeros(b, dtype=np.bool_)
         else:
             truncated = self.steps >= self.max_episode_steps
+        if t._time_limit != np.inf:
+            truncated |= ~terminated & (t_new >= t._time_limit - 1e-9)
         ones = np.ones(b, dtype=np.bool_)
         infos: dict[str, Any] = {
             "energy_spent": self.energy_spent.copy(),
@@ -398,6 +442,8 @@ class _SoaringVectorBase(VectorEnv):
             "is_success": codes == GOAL,
             "reward_terms": reward_terms,
         }
+        if t.has_battery:
+            infos["battery_left"] = self.battery_left.copy()
         for key in list(infos):
             infos["_" + key] = ones.copy()
         for key in list(infos["reward_terms"]):
@@ -455,9 +501,9 @@ class SoaringVectorEnv(_SoaringVectorBase):
         classify_batch(out, np.repeat(self._prm, p, axis=0), codes, ks)
         code2 = codes.reshape(b, p)
         k2 = ks.reshape(b, p)
-        valid = (code2 != CRASH) & (code2 != OUT_OF_BOUNDS) & self._bank_ok
+        valid = (code2 != CRASH) & (code2 != OUT_OF_BOUNDS) & self._allowed
         for i in np.flatnonzero(~valid.any(axis=1)).tolist():
-            kk = np.where(self._bank_ok, k2[i], -1)
+            kk = np.where(self._allowed, k2[i], -1)
             valid[i] = kk == kk.max()
         return valid
 

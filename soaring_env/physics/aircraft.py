@@ -22,9 +22,14 @@ from numba import njit
 
 from soaring_env._jit import FASTMATH as _FM
 from soaring_env._validation import ConfigError, broadcast_flat, check_choice, check_positive, check_range, check_type
-from soaring_env.physics.atmosphere import MAX_HEIGHT, G, _density
+from soaring_env.physics.atmosphere import MAX_HEIGHT, G, _density, air_density
 
 THRUST_MODELS = ("trim", "paper")
+#: A Tempest-like maximum lift coefficient [-]: the one that makes the reported stall speed of
+#: 11 m/s at sea level (``stall_speed``) the wings-level stall, 2 m g / (rho0 v_s^2 S) = 1.27 for
+#: 6.4 kg on 0.668 m^2 -- typical of the low-Reynolds-number sailplane airfoils of this class.
+#: Used by the soaring tasks (thermal climb, cross-country); the paper's envs keep ``None``.
+TEMPEST_CL_MAX = 1.27
 
 
 @dataclass(frozen=True)
@@ -44,6 +49,11 @@ class Aircraft:
         ``"paper"`` (the paper's literal equations with a fixed C_L0).
     :param stall_speed: reported stall speed [m/s]; informative only (the paper's 10 m/s
         primitives fly below it).
+    :param cl_max: maximum lift coefficient [-] (a stall limit), or ``None`` (default: the paper's
+        unconstrained model). Edges whose coordinated turn needs more lift
+        (:meth:`lift_coefficient`) are masked in the envs, invalid for the planners and outside the
+        continuous envelope (:class:`~soaring_env.primitives.ControlEnvelope`). ``TEMPEST_CL_MAX``
+        is the tasks' value.
     """
 
     mass: float = 6.40
@@ -56,8 +66,11 @@ class Aircraft:
     eta_p: float = 1.0
     thrust_model: str = "trim"
     stall_speed: float = 11.0
+    cl_max: float | None = None
 
     def __post_init__(self) -> None:
+        if self.cl_max is not None:
+            object.__setattr__(self, "cl_max", check_range("cl_max", self.cl_max, 0.0, 5.0, low_open=True))
         for name in ("mass", "wing_area", "aspect_ratio", "oswald", "cl0", "stall_speed"):
             object.__setattr__(self, name, check_positive(name, getattr(self, name)))
         check_range("oswald", self.oswald, 0.0, 1.0, low_open=True)
@@ -71,6 +84,16 @@ class Aircraft:
     def weight(self) -> float:
         """Weight m g [N]."""
         return self.mass * G
+
+    @property
+    def max_lift_to_drag(self) -> float:
+        """Best glide ratio (L/D)_max = sqrt(pi AR e / C_D0) / 2 of the parabolic polar [-]."""
+        return 0.5 * math.sqrt(math.pi * self.aspect_ratio * self.oswald / self.cd0)
+
+    def cruise_energy(self, distance: float) -> float:
+        """Motor energy [J/kg] to fly ``distance`` [m] level in still air at the best L/D (the
+        cheapest powered flight): ``distance g / ((L/D)_max eta_ec eta_p)``."""
+        return float(distance) * G / (self.max_lift_to_drag * self.eta_ec * self.eta_p)
 
     @property
     def span(self) -> float:
@@ -132,6 +155,32 @@ class Aircraft:
         out = np.empty(v.shape)
         _glide_angles(v, w, h, self.packed(), out)
         return out.reshape(shape)
+
+    def lift_coefficient(self, airspeed, gamma, bank, height) -> np.ndarray:
+        """Lift coefficient [-] of steady coordinated flight, ``C_L = 2 m g cos(gamma) / (rho v_a^2 S cos(phi))``
+        (the lift balances weight in the turn: the "trim" model's lift, whichever thrust model).
+
+        :param airspeed: v_a [m/s]; :param gamma: path angle [rad]; :param bank: bank angle [rad];
+        :param height: height [m] (ISA density).
+        """
+        v, g_, p, h = (
+            np.array(a)
+            for a in np.broadcast_arrays(*(np.asarray(x, np.float64) for x in (airspeed, gamma, bank, height)))
+        )
+        if not (np.all(np.isfinite(v) & (v > 0.0)) and np.all(np.abs(p) < math.pi / 2) and np.all(np.isfinite(g_))):
+            raise ConfigError("airspeed must be finite and > 0 m/s, bank within (-90, 90) deg, gamma finite")
+        rho = air_density(h)
+        return 2.0 * self.weight * np.cos(g_) / (rho * v * v * self.wing_area * np.cos(p))
+
+    def max_bank(self, airspeed, height: float) -> np.ndarray:
+        """Largest bank angle [rad] at which level coordinated flight at ``airspeed`` [m/s] stays within
+        ``cl_max`` at ``height`` [m] (pi/2 without a stall limit; 0 where even wings level stalls)."""
+        v = np.asarray(airspeed, dtype=np.float64)
+        if self.cl_max is None:
+            return np.full(v.shape, 0.5 * math.pi)
+        rho = float(air_density(height))
+        cos_min = 2.0 * self.weight / (rho * v * v * self.wing_area * self.cl_max)
+        return np.arccos(np.clip(cos_min, 0.0, 1.0))
 
     def fuel_power(self, airspeed, gamma, bank, height) -> np.ndarray:
         """Specific fuel power ``T v_a / (m eta_ec eta_p)`` [W/kg] = [J/(kg s)]."""
