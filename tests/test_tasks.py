@@ -152,7 +152,7 @@ def test_cross_country_battery_runs_out() -> None:
     used = 0.0
     term = False
     while not term:  # full power climb: the battery runs out long before the goal
-        _, r, term, trunc, info = env.step(np.array([1.0, 0.0, 1.0], np.float32))
+        _, _, term, _, info = env.step(np.array([1.0, 0.0, 1.0], np.float32))
         used += info["fuel"] + info["kinetic"]
         assert info["battery_left"] == pytest.approx(u.battery - used)
     assert info["outcome"] == "battery_empty" and info["reward_terms"]["battery_empty"] == -25.0

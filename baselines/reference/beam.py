@@ -48,7 +48,8 @@ that displace a good path's nodes later). :func:`search` therefore runs beams of
 twice that, ... up to ``beam_width``, each seeded with the best plan of the ones before (a seeded
 path's nodes stay in the beam at every depth), so the best cost never gets worse as the knob grows.
 
-Control sets. ``"primitive"``: the 174 primitives (those within the model's bank and stall limits, ``model.allowed_primitives()``), i.e. the
+Control sets. ``"primitive"``: the 174 primitives (those within the model's bank and stall limits,
+``model.allowed_primitives()``), i.e. the
 actions of ``soaring/Soaring-v0``. ``"continuous"``: a grid of normalized ``Box(float32)`` actions of
 ``soaring/SoaringContinuous-v0`` over airspeeds x course rates x path angles, where the path angles
 are the primitives' fixed ones plus, for every (airspeed, course rate) pair, the zero-thrust glide
@@ -197,7 +198,8 @@ def control_set(model: SoaringModel, sampler: str, config: ReferenceConfig) -> n
         idx = np.flatnonzero(ok) if config.primitives is None else np.array(config.primitives, dtype=np.int64)
         if np.any(idx >= model.n_primitives) or not np.all(ok[idx]):
             raise ConfigError(
-                f"primitives={config.primitives!r}: allowed: indices 0..{model.n_primitives - 1} within the bank and stall limits"
+                f"primitives={config.primitives!r}: allowed: indices 0..{model.n_primitives - 1} "
+                "within the bank and stall limits"
             )
         return np.unique(idx).astype(np.float64)[:, None]
     lo, hi = model.control_low, model.control_high

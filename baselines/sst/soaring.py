@@ -593,8 +593,9 @@ def check_goal_reachable(model: SoaringModel) -> None:
     lib = model.library
     wind = math.hypot(sc.field.wind_north, sc.field.wind_east)
     spacing = (float(model.control_high[0]) + wind) * lib.duration / lib.n_points
-    if sc.require_goal().radius < 0.5 * spacing:
+    radius = sc.require_goal().radius
+    if radius < 0.5 * spacing:
         raise SSTError(
-            f"goal.radius={sc.require_goal().radius!r} m is too small to be reached in principle: flown points are up to "
+            f"goal.radius={radius!r} m is too small to be reached in principle: flown points are up to "
             f"{spacing:.3g} m apart (Ts={lib.duration:g} s, N={lib.n_points}); allowed: radius >= {0.5 * spacing:.3g} m"
         )
