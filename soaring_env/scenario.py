@@ -37,7 +37,7 @@ from soaring_env._validation import (
     check_type,
 )
 from soaring_env.physics.atmosphere import MAX_HEIGHT
-from soaring_env.physics.thermals import THERMAL_MODELS, Thermal, WindField
+from soaring_env.physics.thermals import MIN_PERIOD, THERMAL_MODELS, Thermal, WindField
 
 #: Most thermals a random scenario may draw (the kernels loop over all of them at every point).
 MAX_RANDOM_THERMALS = 100
@@ -190,7 +190,7 @@ class Scenario:
                 "wind_north": f.wind_north,
                 "wind_east": f.wind_east,
                 "drift": f.drift,
-                "thermals": [asdict(t) for t in f.thermals],
+                "thermals": [_thermal_dict(t) for t in f.thermals],
             },
         }
 
@@ -211,9 +211,7 @@ class Scenario:
                 raise ConfigError(f"{source}: field.thermals={raw_thermals!r} must be a list of thermal objects")
             thermals = tuple(
                 Thermal(
-                    **_keys(
-                        t, f"{source}: field.thermals[{i}]", required=("north", "east"), optional=("strength", "radius")
-                    )
+                    **_keys(t, f"{source}: field.thermals[{i}]", required=("north", "east"), optional=_THERMAL_OPTIONAL)
                 )
                 for i, t in enumerate(raw_thermals)
             )
@@ -261,6 +259,19 @@ class Scenario:
         except (OSError, UnicodeDecodeError) as exc:
             raise ConfigError(f"cannot read scenario file {str(path)!r}: {exc}") from None
         return cls.from_json(text, source=f"scenario file {str(path)!r}")
+
+
+#: Optional keys of a thermal object in scenario JSON (all but north, east): the life cycle and
+#: fluctuation keys are written only where they differ from their defaults (steady thermals keep
+#: the JSON of before they existed), and files without them load as steady thermals.
+_THERMAL_OPTIONAL = ("strength", "radius", "birth", "lifetime", "rise", "decay", "amplitude", "period", "phase")
+_THERMAL_DEFAULTS = {f.name: f.default for f in dataclasses.fields(Thermal)}
+
+
+def _thermal_dict(t: Thermal) -> dict[str, Any]:
+    """A thermal as JSON: north, east, strength, radius, and the time-dependence keys that are set."""
+    d = asdict(t)
+    return {k: v for k, v in d.items() if k in ("north", "east", "strength", "radius") or v != _THERMAL_DEFAULTS[k]}
 
 
 def _keys(d: Any, where: str, *, required: tuple[str, ...], optional: tuple[str, ...]) -> dict[str, Any]:
@@ -380,6 +391,8 @@ def get_scenario(name: str | os.PathLike[str], random_scenario: Mapping[str, Any
 
 #: Goal radius of random scenarios [m].
 _RANDOM_GOAL_RADIUS = 150.0
+#: Largest time [s] a random scenario's life-cycle and fluctuation ranges may name (11.6 days).
+MAX_RANDOM_TIME = 1e6
 
 
 def check_int_pair(name: str, value: Any, low: int, high: int) -> tuple[int, int]:
@@ -401,6 +414,11 @@ def make_scenario(
     drift: bool = False,
     bounds: Bounds | None = None,
     name: str = "random",
+    lifecycle: tuple[float, float] | None = None,
+    rise_time: float = 120.0,
+    birth_window: tuple[float, float] = (0.0, 0.0),
+    strength_variation: tuple[float, float] | None = None,
+    variation_period: tuple[float, float] = (300.0, 900.0),
 ) -> Scenario:
     """A random scenario drawn only from ``rng`` (same generator state -> same scenario).
 
@@ -412,6 +430,22 @@ def make_scenario(
     [0, ``MAX_RANDOM_THERMALS``], ``strength`` in (0, 20] m/s, ``wind_speed`` in [0, 50] m/s,
     ``goal_distance`` above the goal radius (150 m) and within the domain, ``height`` inside
     (0, ``bounds.height_max``]; a bad one raises a :class:`ConfigError` naming it.
+
+    Thermal life cycle and strength fluctuation (see :mod:`soaring_env.physics.thermals`), both off
+    by default; with both off no extra random number is drawn (a seed gives the scenario it gave
+    before these options existed), and with either on their numbers are drawn after all others:
+
+    :param lifecycle: range of the thermals' lifetimes [s] (birth to death), or None (default):
+        steady thermals. Needs ``lifecycle[0] >= 2 rise_time``.
+    :param rise_time: rise and decay time [s] of every thermal with a life cycle (>= 0).
+    :param birth_window: range of the birth times [s] (default (0, 0): all born at t = 0);
+        negative births are thermals already alive at the start, later ones appear during the flight.
+    :param strength_variation: range of the relative fluctuation amplitude a, in [0, 1), or None
+        (default): constant strengths. Each thermal's phase is uniform in [-pi, pi).
+    :param variation_period: range of the fluctuation period [s] (>= ``MIN_PERIOD``, 10 s).
+
+    ``rise_time``, ``birth_window`` and ``variation_period`` other than their defaults need their
+    option on (a ConfigError otherwise, rather than being ignored).
     """
     check_type("rng", rng, np.random.Generator)
     if bounds is None:
@@ -435,6 +469,7 @@ def make_scenario(
     zi = check_positive("zi", zi)
     drift = check_bool("drift", drift)
     check_type("name", name, str)
+    time_kw = _check_time_options(lifecycle, rise_time, birth_window, strength_variation, variation_period)
     span_n = bounds.north_max - bounds.north_min
     span_e = bounds.east_max - bounds.east_min
     if goal_distance[1] > 0.9 * math.hypot(span_n, span_e):
@@ -479,6 +514,8 @@ def make_scenario(
             < margin
         ):
             continue
+        if time_kw is not None:  # after every other draw of the accepted scenario: old seeds unchanged
+            thermals = _draw_time_dependence(rng, thermals, *time_kw)
         return Scenario(
             field=WindField(
                 thermals=tuple(thermals),
@@ -494,3 +531,68 @@ def make_scenario(
             name=name,
         )
     raise ConfigError("could not draw a scenario that fits the bounds; widen bounds or shorten goal_distance")
+
+
+_Range = tuple[float, float]
+#: validated (lifecycle, rise_time, birth_window, strength_variation, variation_period)
+_TimeOptions = tuple[_Range | None, float, _Range, _Range | None, _Range]
+
+
+def _check_time_options(
+    lifecycle: Any, rise_time: Any, birth_window: Any, strength_variation: Any, variation_period: Any
+) -> _TimeOptions | None:
+    """The validated life-cycle and fluctuation options of :func:`make_scenario`, or None if both are off."""
+    life = None
+    if lifecycle is not None:
+        life = check_pair("lifecycle", lifecycle, 0.0, MAX_RANDOM_TIME)
+        if life[0] <= 0.0:
+            raise ConfigError(f"lifecycle={lifecycle!r} must have low > 0 s (a lifetime)")
+    rise = check_range("rise_time", rise_time, 0.0, 0.5 * MAX_RANDOM_TIME)
+    births = check_pair("birth_window", birth_window, -MAX_RANDOM_TIME, MAX_RANDOM_TIME)
+    amp = None
+    if strength_variation is not None:
+        amp = check_pair("strength_variation", strength_variation, 0.0, 1.0)
+        if amp[1] >= 1.0:
+            raise ConfigError(f"strength_variation={strength_variation!r} must have high < 1 (an amplitude in [0, 1))")
+    period = check_pair("variation_period", variation_period, MIN_PERIOD, MAX_RANDOM_TIME)
+    if life is None:
+        for name, value, default in (("rise_time", rise, 120.0), ("birth_window", births, (0.0, 0.0))):
+            if value != default:
+                raise ConfigError(f"{name}={value!r} needs lifecycle=(low, high) lifetimes [s]; lifecycle is None")
+    elif life[0] < 2.0 * rise:
+        raise ConfigError(
+            f"lifecycle={lifecycle!r} allows lifetimes shorter than rise + decay = 2 rise_time = {2.0 * rise:g} s; "
+            "allowed: lifecycle low >= 2 rise_time"
+        )
+    if amp is None and period != (300.0, 900.0):
+        raise ConfigError(f"variation_period={period!r} needs strength_variation=(low, high); it is None")
+    if life is None and amp is None:
+        return None
+    return life, rise, births, amp, period
+
+
+def _draw_time_dependence(
+    rng: np.random.Generator,
+    thermals: list[Thermal],
+    life: tuple[float, float] | None,
+    rise: float,
+    births: tuple[float, float],
+    amp: tuple[float, float] | None,
+    period: tuple[float, float],
+) -> list[Thermal]:
+    """``thermals`` with life cycles and fluctuations drawn from ``rng`` (lifetimes, births, then
+    amplitudes, periods, phases, each as one vector over the thermals)."""
+    k = len(thermals)
+    kw: list[dict[str, Any]] = [{} for _ in range(k)]
+    if life is not None:
+        lifetimes = rng.uniform(*life, k)
+        birth = rng.uniform(*births, k)
+        for j in range(k):
+            kw[j].update(lifetime=float(lifetimes[j]), birth=float(birth[j]), rise=rise, decay=rise)
+    if amp is not None:
+        a = rng.uniform(*amp, k)
+        p = rng.uniform(*period, k)
+        phi = rng.uniform(-math.pi, math.pi, k)
+        for j in range(k):
+            kw[j].update(amplitude=float(a[j]), period=float(p[j]), phase=float(phi[j]))
+    return [replace(t, **kw[j]) for j, t in enumerate(thermals)]
