@@ -248,10 +248,11 @@ class SoaringModel:
 
         The env charges the goal edge to its end (Ts), after its first point inside the goal
         region, so a plan ends at most ``w_max (Ts - Ts/N)`` above the goal's top, where ``w_max``
-        bounds the updraft of any thermal that can reach the goal region within one edge (no thermal
-        near the goal: the goal's top). Powered climbing does not count: it costs more fuel energy
-        than the height it gains, which is what makes ``-g (cap - h)`` an admissible bound on the
-        cost still to go from height h (used by the planners and the reference search).
+        bounds the updraft of any thermal that can reach the goal region within one edge, at any
+        time (1.2 times its peak strength w* (1 + a); no thermal near the goal: the goal's top).
+        Powered climbing does not count: it costs more fuel energy than the height it gains, which
+        is what makes ``-g (cap - h)`` an admissible bound on the cost still to go from height h
+        (used by the planners and the reference search).
         """
         sc = self.scenario
         g = sc.require_goal()
@@ -265,7 +266,8 @@ class SoaringModel:
         w_max = 0.0
         for t, r in zip(f.thermals, infl, strict=True):
             if f.drift or math.hypot(t.north - g.north, t.east - g.east) <= g.radius + reach + r:
-                w_max = max(w_max, 1.2 * t.strength)  # |updraft| <= 1.2 w* (as in the rollout kernel)
+                # |updraft| <= 1.2 w* (1 + a) at any time (as in the rollout kernel)
+                w_max = max(w_max, 1.2 * t.peak_strength)
         return min(top + w_max * (lib.duration - lib.duration / lib.n_points), sc.bounds.height_max)
 
     @property

@@ -36,6 +36,7 @@ from soaring_env.physics.aircraft import _AC_ETA, _AC_MASS, _AC_MODEL, Aircraft,
 from soaring_env.physics.atmosphere import LAPSE, MAX_HEIGHT, T0, G, _density, _density_near
 from soaring_env.physics.thermals import (
     _GAUSSIAN,
+    COL_PEAK,
     GAUSSIAN_CUTOFF,
     PACKED_COLUMNS,
     WindField,
@@ -336,7 +337,8 @@ def rollout(
     :param control: constant control ``(v_a [m/s], chi_dot [rad/s], gamma [rad])``, shape (3,) or (B, 3).
     :param library: primitive library (Ts, N); default ``PrimitiveLibrary()``.
     :param duration: how long the control is held [s]; default the library's Ts.
-    :param t0: start time [s], scalar or (B,); matters only for drifting thermals.
+    :param t0: start time [s], scalar or (B,); matters only for drifting thermals and those with a
+        life cycle or a fluctuating strength.
     :param airspeed_prev: airspeed of the previous edge [m/s] (scalar or (B,)), for the kinetic
         term; None or NaN entries charge nothing.
     :param max_substep: largest integration substep near thermals [s], at least ``MIN_SUBSTEP``.
@@ -488,7 +490,7 @@ class Propagator:
         params: np.ndarray,
     ) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`run` with row b in field ``field_index[b]`` (int64, (B,); empty: field 0 for all) of a
-        packed table of F fields: ``thermals`` (F, n_max, 4) rows of :attr:`WindField.packed` (the
+        packed table of F fields: ``thermals`` (F, n_max, PACKED_COLUMNS) rows of :attr:`WindField.packed` (the
         first ``n_thermals[f]`` used), ``params`` (F, 6) rows of :func:`field_params`. No validation:
         every index must be < F. The aircraft, library and substep are this propagator's."""
         b = x0.shape[0]
@@ -506,7 +508,7 @@ _NO_FIELD_INDEX = np.empty(0, dtype=np.int64)
 
 
 def pack_fields(fields: Sequence[WindField]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Wind fields as the table :meth:`Propagator.run_fields` reads: ``thermals`` (F, n_max, 4)
+    """Wind fields as the table :meth:`Propagator.run_fields` reads: ``thermals`` (F, n_max, PACKED_COLUMNS)
     (row f starts with ``fields[f].packed``, zero-padded), ``n_thermals`` (F,) int64 and ``params``
     (F, 6) rows of :func:`field_params`; all fresh writable arrays (the kernel's one specialization)."""
     if len(fields) == 0:
@@ -614,9 +616,9 @@ def _rollout_kernel(
             dvx = fpar[fld, FP_DRIFT_NORTH]
             dvy = fpar[fld, FP_DRIFT_EAST]
             wind = math.sqrt(wn * wn + we * we)
-            w_bound = 0.0  # |updraft| <= 1.2 w* (Allen's peak/w* stays below 1.1)
+            w_bound = 0.0  # |updraft| <= 1.2 w* (1 + a) (Allen's peak/w* stays below 1.1)
             for j in range(nth):
-                w_bound = max(w_bound, 1.2 * th[j, 2])
+                w_bound = max(w_bound, 1.2 * th[j, COL_PEAK])
                 infl[j] = GAUSSIAN_CUTOFF * th[j, 3] if model == _GAUSSIAN else th[j, 3]
         v = ctrl[b, 0]
         gam = ctrl[b, 1]
@@ -633,7 +635,9 @@ def _rollout_kernel(
         # Relative to a (possibly drifting) thermal the aircraft moves at most u + 2|wind|.
         reach = (u + 2.0 * wind) * dt
         # Thermals the whole edge can come near: an arc stays within its diameter 2u/|om| of its
-        # start, a spline within the sum over its two arcs, any path within u * dur.
+        # start, a spline within the sum over its two arcs, any path within u * dur. These checks
+        # use positions only, so they hold at any time: an unborn or dead thermal only makes an
+        # interval integrated that needed not be (its updraft there is exactly zero).
         span = u * dur
         w1 = abs(ctrl[b, 2])
         w2 = abs(ctrl[b, 3])

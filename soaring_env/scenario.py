@@ -38,7 +38,7 @@ from soaring_env._validation import (
     check_type,
 )
 from soaring_env.physics.atmosphere import MAX_HEIGHT
-from soaring_env.physics.thermals import THERMAL_MODELS, Thermal, WindField
+from soaring_env.physics.thermals import MIN_PERIOD, THERMAL_MODELS, Thermal, WindField
 
 #: Most thermals a random scenario may draw (the kernels loop over all of them at every point).
 MAX_RANDOM_THERMALS = 100
@@ -201,7 +201,7 @@ class Scenario:
                 "wind_north": f.wind_north,
                 "wind_east": f.wind_east,
                 "drift": f.drift,
-                "thermals": [asdict(t) for t in f.thermals],
+                "thermals": [_thermal_dict(t) for t in f.thermals],
             },
         }
 
@@ -222,9 +222,7 @@ class Scenario:
                 raise ConfigError(f"{source}: field.thermals={raw_thermals!r} must be a list of thermal objects")
             thermals = tuple(
                 Thermal(
-                    **_keys(
-                        t, f"{source}: field.thermals[{i}]", required=("north", "east"), optional=("strength", "radius")
-                    )
+                    **_keys(t, f"{source}: field.thermals[{i}]", required=("north", "east"), optional=_THERMAL_OPTIONAL)
                 )
                 for i, t in enumerate(raw_thermals)
             )
@@ -276,6 +274,19 @@ class Scenario:
         except (OSError, UnicodeDecodeError) as exc:
             raise ConfigError(f"cannot read scenario file {str(path)!r}: {exc}") from None
         return cls.from_json(text, source=f"scenario file {str(path)!r}")
+
+
+#: Optional keys of a thermal object in scenario JSON (all but north, east): the life cycle and
+#: fluctuation keys are written only where they differ from their defaults (steady thermals keep
+#: the JSON of before they existed), and files without them load as steady thermals.
+_THERMAL_OPTIONAL = ("strength", "radius", "birth", "lifetime", "rise", "decay", "amplitude", "period", "phase")
+_THERMAL_DEFAULTS = {f.name: f.default for f in dataclasses.fields(Thermal)}
+
+
+def _thermal_dict(t: Thermal) -> dict[str, Any]:
+    """A thermal as JSON: north, east, strength, radius, and the time-dependence keys that are set."""
+    d = asdict(t)
+    return {k: v for k, v in d.items() if k in ("north", "east", "strength", "radius") or v != _THERMAL_DEFAULTS[k]}
 
 
 def _keys(d: Any, where: str, *, required: tuple[str, ...], optional: tuple[str, ...]) -> dict[str, Any]:
@@ -412,7 +423,7 @@ def check_generator_keywords(generator: Any, kwargs: Mapping[str, Any], field: s
     """A :class:`ConfigError` naming ``field`` if ``kwargs`` has keys ``generator`` does not take."""
     if not isinstance(kwargs, Mapping):
         raise ConfigError(f"{field}={kwargs!r} must be a dict of {generator.__name__} keywords")
-    allowed = [p for p in inspect.signature(generator).parameters if p not in ("rng", "name")]
+    allowed = [p for p in inspect.signature(generator).parameters if p != "rng"]
     unknown = sorted(str(k) for k in kwargs if k not in allowed)
     if unknown:
         raise ConfigError(
@@ -422,6 +433,8 @@ def check_generator_keywords(generator: Any, kwargs: Mapping[str, Any], field: s
 
 #: Goal radius of random scenarios [m].
 _RANDOM_GOAL_RADIUS = 150.0
+#: Largest time [s] a random scenario's life-cycle and fluctuation ranges may name (11.6 days).
+MAX_RANDOM_TIME = 1e6
 
 
 def check_int_pair(name: str, value: Any, low: int, high: int) -> tuple[int, int]:
@@ -443,6 +456,11 @@ def make_scenario(
     drift: bool = False,
     bounds: Bounds | None = None,
     name: str = "random",
+    lifecycle: tuple[float, float] | None = None,
+    rise_time: float = 120.0,
+    birth_window: tuple[float, float] = (0.0, 0.0),
+    strength_variation: tuple[float, float] | None = None,
+    variation_period: tuple[float, float] = (300.0, 900.0),
 ) -> Scenario:
     """A random scenario drawn only from ``rng`` (same generator state -> same scenario).
 
@@ -454,16 +472,30 @@ def make_scenario(
     [0, ``MAX_RANDOM_THERMALS``], ``strength`` in (0, 20] m/s, ``wind_speed`` in [0, 50] m/s,
     ``goal_distance`` above the goal radius (150 m) and within the domain, ``height`` inside
     (0, ``bounds.height_max``]; a bad one raises a :class:`ConfigError` naming it.
+
+    Thermal life cycle and strength fluctuation (see :mod:`soaring_env.physics.thermals`), both off
+    by default; with both off no extra random number is drawn (a seed gives the scenario it gave
+    before these options existed), and with either on their numbers are drawn after all others:
+
+    :param lifecycle: range of the thermals' lifetimes [s] (birth to death), or None (default):
+        steady thermals. Needs ``lifecycle[0] >= 2 rise_time``.
+    :param rise_time: rise and decay time [s] of every thermal with a life cycle (>= 0).
+    :param birth_window: range of the birth times [s] (default (0, 0): all born at t = 0);
+        negative births are thermals already alive at the start, later ones appear during the flight.
+    :param strength_variation: range of the relative fluctuation amplitude a, in [0, 1), or None
+        (default): constant strengths. Each thermal's phase is uniform in [-pi, pi).
+    :param variation_period: range of the fluctuation period [s] (>= ``MIN_PERIOD``, 10 s).
+
+    ``rise_time``, ``birth_window`` and ``variation_period`` other than their defaults need their
+    option on (a ConfigError otherwise, rather than being ignored).
     """
     check_type("rng", rng, np.random.Generator)
     if bounds is None:
         bounds = Bounds(-3000.0, 3000.0, -3000.0, 3000.0, 1500.0)
     check_type("bounds", bounds, Bounds)
-    n_thermals = check_int_pair("n_thermals", n_thermals, 0, MAX_RANDOM_THERMALS)
-    strength = check_pair("strength", strength, 0.0, 20.0)
-    if strength[0] <= 0.0:
-        raise ConfigError(f"strength={strength!r} must have low > 0 m/s (a thermal's w* or peak is positive)")
-    wind_speed = check_pair("wind_speed", wind_speed, 0.0, 50.0)
+    n_thermals, strength, wind_speed, zi, drift = _check_field_ranges(
+        n_thermals, strength, wind_speed, model, zi, drift, name
+    )
     goal_distance = check_pair("goal_distance", goal_distance, _RANDOM_GOAL_RADIUS, math.inf)
     if goal_distance[0] <= _RANDOM_GOAL_RADIUS:
         raise ConfigError(
@@ -472,11 +504,7 @@ def make_scenario(
     height = check_pair("height", height, 0.0, bounds.height_max)
     if height[0] <= 0.0:
         raise ConfigError(f"height={height!r} must have low > 0 m (above the ground)")
-    check_type("model", model, str)
-    check_choice("model", model, THERMAL_MODELS)
-    zi = check_positive("zi", zi)
-    drift = check_bool("drift", drift)
-    check_type("name", name, str)
+    time_kw = _check_time_options(lifecycle, rise_time, birth_window, strength_variation, variation_period)
     span_n = bounds.north_max - bounds.north_min
     span_e = bounds.east_max - bounds.east_min
     if goal_distance[1] > 0.9 * math.hypot(span_n, span_e):
@@ -502,8 +530,7 @@ def make_scenario(
             tn = sn + along * (gn - sn) - across * math.sin(bearing)
             te = se + along * (ge - se) + across * math.cos(bearing)
             thermals.append(Thermal(north=tn, east=te, strength=rng.uniform(*strength)))
-        ws = rng.uniform(*wind_speed)
-        wd = rng.uniform(-math.pi, math.pi)
+        wn, we = _draw_wind(rng, wind_speed)
         inside = bounds.contains(np.array([sn, gn]), np.array([se, ge]), np.array([sh, gh]))
         margin = 300.0
         if (
@@ -521,13 +548,15 @@ def make_scenario(
             < margin
         ):
             continue
+        if time_kw is not None:  # after every other draw of the accepted scenario: old seeds unchanged
+            thermals = _draw_time_dependence(rng, thermals, *time_kw)
         return Scenario(
             field=WindField(
                 thermals=tuple(thermals),
                 model=model,
                 zi=zi,
-                wind_north=ws * math.cos(wd),
-                wind_east=ws * math.sin(wd),
+                wind_north=wn,
+                wind_east=we,
                 drift=drift,
             ),
             start=(sn, se, chi, sh),
@@ -536,6 +565,71 @@ def make_scenario(
             name=name,
         )
     raise ConfigError("could not draw a scenario that fits the bounds; widen bounds or shorten goal_distance")
+
+
+_Range = tuple[float, float]
+#: validated (lifecycle, rise_time, birth_window, strength_variation, variation_period)
+_TimeOptions = tuple[_Range | None, float, _Range, _Range | None, _Range]
+
+
+def _check_time_options(
+    lifecycle: Any, rise_time: Any, birth_window: Any, strength_variation: Any, variation_period: Any
+) -> _TimeOptions | None:
+    """The validated life-cycle and fluctuation options of :func:`make_scenario`, or None if both are off."""
+    life = None
+    if lifecycle is not None:
+        life = check_pair("lifecycle", lifecycle, 0.0, MAX_RANDOM_TIME)
+        if life[0] <= 0.0:
+            raise ConfigError(f"lifecycle={lifecycle!r} must have low > 0 s (a lifetime)")
+    rise = check_range("rise_time", rise_time, 0.0, 0.5 * MAX_RANDOM_TIME)
+    births = check_pair("birth_window", birth_window, -MAX_RANDOM_TIME, MAX_RANDOM_TIME)
+    amp = None
+    if strength_variation is not None:
+        amp = check_pair("strength_variation", strength_variation, 0.0, 1.0)
+        if amp[1] >= 1.0:
+            raise ConfigError(f"strength_variation={strength_variation!r} must have high < 1 (an amplitude in [0, 1))")
+    period = check_pair("variation_period", variation_period, MIN_PERIOD, MAX_RANDOM_TIME)
+    if life is None:
+        for name, value, default in (("rise_time", rise, 120.0), ("birth_window", births, (0.0, 0.0))):
+            if value != default:
+                raise ConfigError(f"{name}={value!r} needs lifecycle=(low, high) lifetimes [s]; lifecycle is None")
+    elif life[0] < 2.0 * rise:
+        raise ConfigError(
+            f"lifecycle={lifecycle!r} allows lifetimes shorter than rise + decay = 2 rise_time = {2.0 * rise:g} s; "
+            "allowed: lifecycle low >= 2 rise_time"
+        )
+    if amp is None and period != (300.0, 900.0):
+        raise ConfigError(f"variation_period={period!r} needs strength_variation=(low, high); it is None")
+    if life is None and amp is None:
+        return None
+    return life, rise, births, amp, period
+
+
+def _draw_time_dependence(
+    rng: np.random.Generator,
+    thermals: list[Thermal],
+    life: tuple[float, float] | None,
+    rise: float,
+    births: tuple[float, float],
+    amp: tuple[float, float] | None,
+    period: tuple[float, float],
+) -> list[Thermal]:
+    """``thermals`` with life cycles and fluctuations drawn from ``rng`` (lifetimes, births, then
+    amplitudes, periods, phases, each as one vector over the thermals)."""
+    k = len(thermals)
+    kw: list[dict[str, Any]] = [{} for _ in range(k)]
+    if life is not None:
+        lifetimes = rng.uniform(*life, k)
+        birth = rng.uniform(*births, k)
+        for j in range(k):
+            kw[j].update(lifetime=float(lifetimes[j]), birth=float(birth[j]), rise=rise, decay=rise)
+    if amp is not None:
+        a = rng.uniform(*amp, k)
+        p = rng.uniform(*period, k)
+        phi = rng.uniform(-math.pi, math.pi, k)
+        for j in range(k):
+            kw[j].update(amplitude=float(a[j]), period=float(p[j]), phase=float(phi[j]))
+    return [replace(t, **kw[j]) for j, t in enumerate(thermals)]
 
 
 def _draw_wind(rng: np.random.Generator, wind_speed: tuple[float, float]) -> tuple[float, float]:
@@ -579,6 +673,11 @@ def make_climb_scenario(
     drift: bool = False,
     half_width: float = 3000.0,
     height_max: float = 1500.0,
+    lifecycle: tuple[float, float] | None = None,
+    rise_time: float = 120.0,
+    birth_window: tuple[float, float] = (0.0, 0.0),
+    strength_variation: tuple[float, float] | None = None,
+    variation_period: tuple[float, float] = (300.0, 900.0),
     name: str = "climb",
 ) -> Scenario:
     """A thermal-climb scenario drawn only from ``rng``: the aircraft starts low among several
@@ -587,12 +686,15 @@ def make_climb_scenario(
     Start at the domain centre (origin) with a uniform heading, at a height uniform in ``height``
     [m]; ``n_thermals`` thermals uniform over the disc of radius ``thermal_radius`` [m] around the
     start, strengths uniform in ``strength`` [m/s]; wind as :func:`make_scenario`. The domain is
-    the square of ``half_width`` [m] around the origin, ceiling ``height_max`` [m].
+    the square of ``half_width`` [m] around the origin, ceiling ``height_max`` [m]. The thermal
+    realism options (``lifecycle``, ``rise_time``, ``birth_window``, ``strength_variation``,
+    ``variation_period``) are those of :func:`make_scenario`.
     """
     check_type("rng", rng, np.random.Generator)
     n_thermals, strength, wind_speed, zi, drift = _check_field_ranges(
         n_thermals, strength, wind_speed, model, zi, drift, name
     )
+    time_kw = _check_time_options(lifecycle, rise_time, birth_window, strength_variation, variation_period)
     half = check_positive("half_width", half_width)
     r_max = check_range("thermal_radius", thermal_radius, 0.0, half)
     bounds = Bounds(-half, half, -half, half, check_range("height_max", height_max, 0.0, MAX_HEIGHT, low_open=True))
@@ -608,6 +710,8 @@ def make_climb_scenario(
         a = rng.uniform(-math.pi, math.pi)
         thermals.append(Thermal(north=r * math.cos(a), east=r * math.sin(a), strength=rng.uniform(*strength)))
     wn, we = _draw_wind(rng, wind_speed)
+    if time_kw is not None:
+        thermals = _draw_time_dependence(rng, thermals, *time_kw)
     return Scenario(
         field=WindField(thermals=tuple(thermals), model=model, zi=zi, wind_north=wn, wind_east=we, drift=drift),
         start=(0.0, 0.0, chi, h0),
@@ -632,6 +736,11 @@ def make_cross_country_scenario(
     drift: bool = False,
     margin: float = 3000.0,
     height_max: float = 1500.0,
+    lifecycle: tuple[float, float] | None = None,
+    rise_time: float = 120.0,
+    birth_window: tuple[float, float] = (0.0, 0.0),
+    strength_variation: tuple[float, float] | None = None,
+    variation_period: tuple[float, float] = (300.0, 900.0),
     name: str = "xc",
 ) -> Scenario:
     """A cross-country scenario drawn only from ``rng``: a goal ``goal_distance`` [m] away in a
@@ -643,11 +752,12 @@ def make_cross_country_scenario(
     ``thermals_per_km``) uniform along the line from 5 % to 100 % of the distance and within
     ``corridor`` [m] of it. The domain is the bounding box of start and goal grown by ``margin``
     [m], ceiling ``height_max`` [m]. The task's battery (see the cross-country env) is what
-    makes the thermals necessary.
+    makes the thermals necessary. Thermal realism options as :func:`make_scenario`.
     """
     check_type("rng", rng, np.random.Generator)
     rate = check_pair("thermals_per_km", thermals_per_km, 0.0, 10.0)
     _, strength, wind_speed, zi, drift = _check_field_ranges((0, 0), strength, wind_speed, model, zi, drift, name)
+    time_kw = _check_time_options(lifecycle, rise_time, birth_window, strength_variation, variation_period)
     dist_range = check_pair("goal_distance", goal_distance, CROSS_COUNTRY_GOAL_RADIUS, 100_000.0)
     if dist_range[0] <= CROSS_COUNTRY_GOAL_RADIUS:
         raise ConfigError(f"goal_distance={goal_distance!r} must have low > {CROSS_COUNTRY_GOAL_RADIUS:g} m")
@@ -673,6 +783,8 @@ def make_cross_country_scenario(
         te = along * math.sin(bearing) + across * math.cos(bearing)
         thermals.append(Thermal(north=tn, east=te, strength=rng.uniform(*strength)))
     wn, we = _draw_wind(rng, wind_speed)
+    if time_kw is not None:
+        thermals = _draw_time_dependence(rng, thermals, *time_kw)
     bounds = Bounds(min(0.0, gn) - pad, max(0.0, gn) + pad, min(0.0, ge) - pad, max(0.0, ge) + pad, top)
     return Scenario(
         field=WindField(thermals=tuple(thermals), model=model, zi=zi, wind_north=wn, wind_east=we, drift=drift),

@@ -494,18 +494,23 @@ def thermal_values(model: SoaringModel, controls: np.ndarray) -> np.ndarray:
     the value being what one metre of climb there is worth, ``-cost / dh`` of the cheapest (most
     negative) climbing edge from near the centre (g for a zero-thrust climb; less where the climb
     needs thrust). Starts: 0 and 20 m from the centre at t = 0, four courses, at the start
-    height (clipped to 50 m .. zi - 100 m)."""
+    height (clipped to 50 m .. zi - 100 m). A thermal with a life cycle is valued when it is first
+    mature after t = 0 (at max(0, birth + rise), its centre drifted there); one dead by then has none."""
     sc = model.scenario
     rows = []
     problem = SoaringProblem(model, "primitive" if controls.shape[1] == 1 else "continuous")
     h = float(np.clip(sc.start[3], 50.0, max(50.0, sc.field.zi - 100.0)))
-    for t in sc.field.thermals:
+    for j, t in enumerate(sc.field.thermals):
+        tm = 0.0 if t.lifetime is None else max(0.0, t.birth + t.rise)
+        if tm >= t.death:
+            continue
+        cn, ce = (t.north, t.east) if tm == 0.0 else (float(c) for c in sc.field.centres(tm)[j])
         starts = []
         for off in (0.0, 20.0):
             for chi in (0.0, 0.5 * math.pi, math.pi - 1e-9, -0.5 * math.pi):
-                n, e = t.north + off * math.cos(chi + 0.5 * math.pi), t.east + off * math.sin(chi + 0.5 * math.pi)
+                n, e = cn + off * math.cos(chi + 0.5 * math.pi), ce + off * math.sin(chi + 0.5 * math.pi)
                 if bool(sc.bounds.contains(n, e, h)):
-                    starts.append([n, e, chi, h, 0.0, math.nan])
+                    starts.append([n, e, chi, h, tm, math.nan])
         if not starts:
             continue
         x = np.repeat(np.array(starts), len(controls), axis=0)

@@ -48,6 +48,7 @@ from soaring_env._validation import (
 )
 from soaring_env.model import FLYING, GOAL, SoaringModel
 from soaring_env.physics.atmosphere import G
+from soaring_env.physics.thermals import COL_BIRTH, COL_DEATH
 from soaring_env.primitives import COL_AIRSPEED, COL_CHI_DOT_1, COL_CHI_DOT_2, COL_GAMMA
 
 SAMPLERS = ("primitive", "continuous")
@@ -383,7 +384,13 @@ class SoaringProblem:
             )
             d_th = np.hypot(cen[:, :, 0] - n_[:, None], cen[:, :, 1] - e_[:, None])
             d_home = np.hypot(cen[:, :, 0] - g.north, cen[:, :, 1] - g.east)
-            j = np.argmin(d_th + d_home, axis=1)
+            detour = d_th + d_home
+            if not f.steady:  # only thermals alive at each state's time are worth a detour
+                tt = states[:, S_T, None]
+                live = (f.packed[None, :, COL_BIRTH] < tt) & (tt < f.packed[None, :, COL_DEATH])
+                detour = np.where(live, detour, np.inf)
+                low = low & live.any(axis=1)  # none alive: fly home as without thermals
+            j = np.argmin(detour, axis=1)
             rows = np.arange(len(states))
             cn, ce = cen[rows, j, 0], cen[rows, j, 1]
             cd_th, dd = towards(cn, ce)

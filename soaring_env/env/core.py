@@ -111,7 +111,9 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
     | 14+5j   | peak updraft of the thermal at the aircraft's height    | m/s                   | [0, 4]    |
     | 15+5j   | updraft radius at that height (Allen r2, Gaussian R)    | m                     | [0, 4]    |
 
-    Slots j = 0 .. K-1 (``n_obs_thermals``, default 3) hold the nearest thermals, nearest first.
+    Slots j = 0 .. K-1 (``n_obs_thermals``, default 3) hold the nearest living thermals, nearest
+    first, with their current strength (thermals with a life cycle are absent before their birth and
+    after their death; see :mod:`soaring_env.env.observation`).
     With ``observe_thermals=False`` the observation is only entries 0-10: the agent senses lift
     locally (entries 6-7) and must find thermals itself -- a partially observed task.
 

@@ -24,13 +24,16 @@ idx   name                    meaning [unit before scaling]                     
 12+5j thermal_j_north         (centre north - Pn) / position_scale [m]               [-10, 10]
 13+5j thermal_j_east          (centre east - Pe) / position_scale [m]                [-10, 10]
 14+5j thermal_j_peak          peak updraft at the aircraft's height / updraft_scale  [0, 4]
-                              [m/s] (Allen: w_peak(h); Gaussian: W)
+                              [m/s] (Allen: w_peak(h); Gaussian: W), of the current
+                              strength (life cycle and fluctuation at time t)
 15+5j thermal_j_radius        updraft radius at that height / position_scale [m]     [0, 4]
                               (Allen: r2(h); Gaussian: R)
 ====  ======================  =====================================================  ==========
 
-Slots hold the K thermals nearest to the aircraft (horizontal distance, centres at the current
-time), nearest first; ties keep scenario order.
+Slots hold the K living thermals nearest to the aircraft (horizontal distance, centres at the
+current time), nearest first; ties keep scenario order. A thermal with a life cycle that is not yet
+born or already dead at the current time is absent: it holds no slot (as in the updraft model, where
+Allen's nearest-thermal rule skips it); with fewer living thermals than K the last slots are zeros.
 """
 
 from __future__ import annotations
@@ -41,7 +44,7 @@ import numpy as np
 from numba import njit
 
 from soaring_env.model import N_CLASSIFY_PARAMS, classify_params
-from soaring_env.physics.thermals import _GAUSSIAN, _r1_over_r2, updraft_at
+from soaring_env.physics.thermals import _GAUSSIAN, COL_DYNAMIC, _r1_over_r2, row_absent, row_factor, updraft_at
 from soaring_env.primitives import FP_DRIFT_EAST, FP_WIND_NORTH, field_params
 from soaring_env.scenario import Scenario
 
@@ -213,6 +216,8 @@ def observe_row(
         best = -1
         best_d2 = 0.0
         for j in range(nth):
+            if row_absent(th, j, t):  # unborn or dead: no slot
+                continue
             dx = th[j, 0] + ox - n
             dy = th[j, 1] + oy - e
             dj = dx * dx + dy * dy
@@ -225,11 +230,14 @@ def observe_row(
             continue
         prev_d2 = best_d2
         prev_j = best
+        w_now = th[best, 2]
+        if th[best, COL_DYNAMIC] != 0.0:  # the current strength (steady rows: the old numbers)
+            w_now *= row_factor(th, best, t)
         if model == _GAUSSIAN:
-            peak = th[best, 2]
+            peak = w_now
             radius = th[best, 3]
         else:  # w_peak scales linearly with w*
-            peak = th[best, 2] * unit_peak
+            peak = w_now * unit_peak
             radius = allen_r2
         out[base] = 1.0
         out[base + 1] = _clip((th[best, 0] + ox - n) / ps, low[base + 1], high[base + 1])

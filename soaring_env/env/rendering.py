@@ -85,7 +85,8 @@ class Renderer:
     def _heatmap(self, env: EpisodeView, height: float, t: float) -> tuple[np.ndarray, list[float]]:
         sc = env.scenario
         b = sc.bounds
-        key = (id(sc), round(height / 10.0), round(t) if sc.field.drift else 0)
+        # the map changes with time where thermals drift, live and die, or fluctuate
+        key = (id(sc), round(height / 10.0), round(t) if sc.field.drift or not sc.field.steady else 0)
         extent = [b.east_min / 1e3, b.east_max / 1e3, b.north_min / 1e3, b.north_max / 1e3]
         if key != self._heat_key or self._heat is None:
             g = self.grid
@@ -159,7 +160,11 @@ class Renderer:
         )
         centres = sc.field.centres(env.time)
         f = sc.field
+        alive = f.alive(env.time)
         for j, (cn, ce) in enumerate(centres):
+            if not alive[j]:  # not yet born or already dead: a faint marker only
+                ax.plot(ce / 1e3, cn / 1e3, marker="+", ms=7, mew=1.0, color="0.55", alpha=0.6)
+                continue
             if f.model == "allen":
                 r_core = f.allen_profile(min(max(float(state[3]), 1.0), f.zi))["r2"]
             else:
@@ -244,8 +249,8 @@ class Renderer:
         g = env.scenario.goal
         if g is not None:
             ins.add_patch(Circle((g.east - e0, g.north - n0), g.radius, fc="#2ecc71", ec="#145a32", alpha=0.5))
-        for tn, te in f.centres(env.time):
-            ins.plot(te - e0, tn - n0, marker="+", ms=7, mew=1.2, color="#7b1010")
+        for (tn, te), live in zip(f.centres(env.time), f.alive(env.time), strict=True):
+            ins.plot(te - e0, tn - n0, marker="+", ms=7, mew=1.2, color="#7b1010" if live else "0.55")
         ins.plot(path[:, 1] - e0, path[:, 0] - n0, color=colour, lw=1.0)
         ins.plot(0.0, 0.0, marker=(3, 0, -math.degrees(float(state[2]))), ms=8, color=colour)
         ins.set_xlim(-half, half)
@@ -276,7 +281,10 @@ class Renderer:
         zmax = max(float(path[:, 3].max()), 0.0 if g is None else g.height + g.radius, 100.0) * 1.1
         top = min(f.zi, zmax)
         theta = np.linspace(0.0, 2.0 * math.pi, 32)
+        alive = f.alive(env.time)
         for j, (tn, te) in enumerate(centres):
+            if not alive[j]:  # no column for a thermal that does not exist now
+                continue
             r = (0.0765 * f.zi if f.model == "allen" else f.thermals[j].radius) / 1e3
             xs, ys = te / 1e3 + r * np.cos(theta), tn / 1e3 + r * np.sin(theta)
             ax.plot(xs, ys, np.zeros_like(theta), color="#c0392b", lw=0.8)
