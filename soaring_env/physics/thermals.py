@@ -49,6 +49,7 @@ from soaring_env._validation import (
     check_bool,
     check_choice,
     check_finite,
+    check_range,
     check_positive,
     check_type,
 )
@@ -73,6 +74,8 @@ ALLEN_SHAPE = np.array(
 ALLEN_R2_MAX_PER_ZI = 0.102 * 0.75
 #: Gaussian thermals are treated as exactly zero beyond 6 R (exp(-36) < 3e-16 of the peak).
 GAUSSIAN_CUTOFF = 6.0
+#: Largest ambient wind component [m/s].
+MAX_WIND = 100.0
 #: Columns of :attr:`WindField.packed` (the kernels' thermal rows): north [m], east [m], strength
 #: [m/s], radius-or-influence [m] (Allen: 2 r2 at zi; Gaussian: R), then the time dependence:
 #: dynamic (1.0 where the thermal has a life cycle or a fluctuation, else 0.0: the kernels then take
@@ -272,8 +275,9 @@ class WindField:
         object.__setattr__(self, "zi", check_positive("zi", self.zi))
         if self.zi >= MAX_HEIGHT:
             raise ConfigError(f"zi={self.zi!r} is outside the model's range; allowed: 0 < zi < {MAX_HEIGHT:g} m")
-        object.__setattr__(self, "wind_north", check_finite("wind_north", self.wind_north))
-        object.__setattr__(self, "wind_east", check_finite("wind_east", self.wind_east))
+        # |wind| <= 100 m/s: far past any soaring weather, and positions stay finite over any edge
+        object.__setattr__(self, "wind_north", check_range("wind_north", self.wind_north, -MAX_WIND, MAX_WIND))
+        object.__setattr__(self, "wind_east", check_range("wind_east", self.wind_east, -MAX_WIND, MAX_WIND))
         object.__setattr__(self, "drift", check_bool("drift", self.drift))
         allen = self.model == "allen"
         rows = []
