@@ -61,7 +61,18 @@ def _all_floats(obj: Any, names: tuple[str, ...]) -> None:
 # --- physics constructors ---------------------------------------------------------------------------
 THERMAL_FIELDS = ("north", "east", "strength", "radius")
 WIND_FIELDS = ("zi", "wind_north", "wind_east")
-AIRCRAFT_FIELDS = ("mass", "wing_area", "aspect_ratio", "oswald", "cd0", "cl0", "eta_ec", "eta_p", "stall_speed", "cl_max")
+AIRCRAFT_FIELDS = (
+    "mass",
+    "wing_area",
+    "aspect_ratio",
+    "oswald",
+    "cd0",
+    "cl0",
+    "eta_ec",
+    "eta_p",
+    "stall_speed",
+    "cl_max",
+)
 
 
 @FAST

@@ -49,8 +49,8 @@ from soaring_env._validation import (
     check_bool,
     check_choice,
     check_finite,
-    check_range,
     check_positive,
+    check_range,
     check_type,
 )
 from soaring_env.physics.atmosphere import MAX_HEIGHT
