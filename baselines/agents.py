@@ -105,6 +105,10 @@ class RandomAgent:
         raise TypeError(f"RandomAgent supports Discrete and Box action spaces, not {space!r}")
 
 
+#: Longest pure-pursuit distance of :class:`HeuristicAgent` [m] (beyond every goal-reaching scenario's).
+LOOKAHEAD = 5000.0
+
+
 def _wrap(angle: float) -> float:
     """Angle wrapped to [-pi, pi)."""
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
@@ -125,7 +129,12 @@ class HeuristicAgent:
        tangent to the course and passes through the goal; a hard turn if the goal is behind) and
        choose the path angle that spreads the height difference to the goal's upper half over the
        remaining distance (gliding costs no fuel, so it prefers to arrive high); fly fast when
-       cruising, slow when climbing or near the goal (tighter turns).
+       cruising, slow when climbing or near the goal (tighter turns). On a battery (cross-country)
+       it never climbs under power: below that line it cruises level at the best-L/D airspeed.
+
+    Without a goal (the thermal-climb task) step 2 becomes **search**: fly straight at the
+    flattest zero-thrust glide (level below 120 m, to stay airborne) until lift is found, turning
+    back towards the start beyond ``search_radius``.
 
     On the discrete env it picks the primitive nearest to that intent (among those the action mask
     allows); on the continuous env it commands the control directly.
@@ -133,13 +142,21 @@ class HeuristicAgent:
     :param lift_threshold: updraft [m/s] that counts as lift worth circling in.
     :param ceiling: fraction of the thermal field's ``zi`` above which it stops circling.
     :param probe: lateral distance [m] of the left/right updraft probes.
+    :param search_radius: without a goal: the distance [m] from the start beyond which it turns back.
     :param name: label in results.
     """
 
     def __init__(
-        self, *, lift_threshold: float = 0.8, ceiling: float = 0.75, probe: float = 60.0, name: str = "heuristic"
+        self,
+        *,
+        lift_threshold: float = 0.8,
+        ceiling: float = 0.75,
+        probe: float = 60.0,
+        search_radius: float = 1000.0,
+        name: str = "heuristic",
     ) -> None:
         self.name = name
+        self.search_radius = search_radius
         self.lift_threshold = lift_threshold
         self.ceiling = ceiling
         self.probe = probe
@@ -159,17 +176,31 @@ class HeuristicAgent:
         lib = model.library
         pn, pe, chi, h = (float(v) for v in np.asarray(base.state, dtype=np.float64)[:4])
         t = float(getattr(base, "time", 0.0))
-        goal = sc.require_goal()
         field = sc.field
         ts = self._step_duration()
         v_slow, v_fast = float(lib.table[:, COL_AIRSPEED].min()), float(lib.table[:, COL_AIRSPEED].max())
+        w_here = float(field.updraft(pn, pe, h, t))
+        goal = sc.goal
+        if goal is None:
+            if w_here >= self.lift_threshold and h < self.ceiling * field.zi and h < sc.bounds.height_max - 150.0:
+                return v_slow, self._circle_side(pn, pe, chi, h, t) * 2.0 * math.pi, 0.0
+            speeds = np.linspace(float(model.control_low[0]), float(model.control_high[0]), 21)
+            glide = model.aircraft.glide_angle(speeds, 0.0, sc.bounds.height_max)
+            k = int(np.argmax(glide))
+            v = float(speeds[k])
+            # search within search_radius of the start (where the task's thermals are): beyond it, turn back
+            dn, de = sc.start[0] - pn, sc.start[1] - pe
+            turn = 0.0
+            if math.hypot(dn, de) > self.search_radius:
+                err = _wrap(math.atan2(de, dn) - chi)
+                turn = max(-math.pi, min(math.pi, err))
+            return v, turn, (0.0 if h < 120.0 else float(glide[k]))
         dn, de = goal.north - pn, goal.east - pe
         dist = math.hypot(dn, de)
         bearing = math.atan2(de, dn)
         err = _wrap(bearing - chi)
         # Height to aim for at arrival: the upper half of the goal sphere (gliding down costs no fuel).
         h_aim = goal.height + 0.5 * goal.radius
-        w_here = float(field.updraft(pn, pe, h, t))
         too_high_to_need = h - h_aim > 0.27 * max(dist - goal.radius, 0.0)  # can glide in at -15 deg
         if (
             w_here >= self.lift_threshold
@@ -178,22 +209,31 @@ class HeuristicAgent:
             and not too_high_to_need
             and dist > goal.radius
         ):
-            # Right of the course chi (clockwise from north) is chi + 90 deg: (-sin chi, cos chi).
-            right = float(field.updraft(pn - self.probe * math.sin(chi), pe + self.probe * math.cos(chi), h, t))
-            left = float(field.updraft(pn + self.probe * math.sin(chi), pe - self.probe * math.cos(chi), h, t))
-            sign = 1.0 if right >= left else -1.0  # chi_dot > 0 turns right (clockwise seen from above)
-            return v_slow, sign * 2.0 * math.pi, 0.0
+            return v_slow, self._circle_side(pn, pe, chi, h, t) * 2.0 * math.pi, 0.0
         # Head for the goal: climb or descend along the straight line to the aim height.
         run = max(dist - 0.5 * goal.radius, 1.0)
         gamma = math.atan2(h_aim - h, run)
         # Slow near the goal (tighter turns) and when climbing (cheaper per metre); fast otherwise.
         v = v_fast if gamma < math.radians(5.0) and dist > 4.0 * v_fast * ts else v_slow
+        if getattr(base, "has_battery", False) and gamma > 0.0:
+            # on a battery: no powered climbs; level at the best-L/D airspeed flies farthest per joule
+            speeds = np.linspace(float(model.control_low[0]), float(model.control_high[0]), 21)
+            v, gamma = float(speeds[int(np.argmax(model.aircraft.glide_angle(speeds, 0.0, sc.bounds.height_max)))]), 0.0
         # Pure pursuit: the arc tangent to the course through the goal has curvature 2 sin(err) / dist.
-        turn = 2.0 * v * ts * math.sin(err) / max(dist, 1.0)
+        # (over at most LOOKAHEAD: a goal 10 km off the nose would otherwise get no turn at all)
+        turn = 2.0 * v * ts * math.sin(err) / min(max(dist, 1.0), LOOKAHEAD)
         if abs(err) > 0.5 * math.pi:  # goal behind: turn hard towards it
             turn = math.copysign(max(abs(turn), abs(err)), err)
         turn = max(-math.pi, min(math.pi, turn))
         return v, turn, gamma
+
+    def _circle_side(self, pn: float, pe: float, chi: float, h: float, t: float) -> float:
+        """+1 to circle right, -1 left: towards the probe that measures more lift."""
+        field = cast(Any, self._require_env().unwrapped).scenario.field
+        # Right of the course chi (clockwise from north) is chi + 90 deg: (-sin chi, cos chi).
+        right = float(field.updraft(pn - self.probe * math.sin(chi), pe + self.probe * math.cos(chi), h, t))
+        left = float(field.updraft(pn + self.probe * math.sin(chi), pe - self.probe * math.cos(chi), h, t))
+        return 1.0 if right >= left else -1.0  # chi_dot > 0 turns right (clockwise seen from above)
 
     def predict(
         self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True

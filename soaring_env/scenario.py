@@ -729,8 +729,8 @@ def make_cross_country_scenario(
     corridor: float = 2000.0,
     strength: tuple[float, float] = (1.5, 3.5),
     wind_speed: tuple[float, float] = (0.0, 3.0),
-    height: tuple[float, float] = (300.0, 500.0),
-    goal_height: float = 300.0,
+    height: tuple[float, float] = (200.0, 400.0),
+    goal_height: float = 400.0,
     model: str = "allen",
     zi: float = 1400.0,
     drift: bool = False,
@@ -748,7 +748,8 @@ def make_cross_country_scenario(
 
     Start at the origin heading within +-90 deg of the goal bearing, at a height uniform in
     ``height`` [m]; goal region of radius ``CROSS_COUNTRY_GOAL_RADIUS`` (300 m) centred at
-    ``goal_height`` [m]; ``round(rate * distance / 1 km)`` thermals (rate uniform in
+    ``goal_height`` [m] (the defaults leave at most 300 m to glide down: about 7 km at the best L/D,
+    less than the shortest goal distance); ``round(rate * distance / 1 km)`` thermals (rate uniform in
     ``thermals_per_km``) uniform along the line from 5 % to 100 % of the distance and within
     ``corridor`` [m] of it. The domain is the bounding box of start and goal grown by ``margin``
     [m], ceiling ``height_max`` [m]. The task's battery (see the cross-country env) is what

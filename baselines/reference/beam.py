@@ -76,7 +76,7 @@ from baselines.reference.bounds import height_cap, without_thermals
 from baselines.sst.core import EDGE_GOAL, EDGE_INVALID, EDGE_VALID, SSTResult, SSTStats
 from baselines.sst.plan import Plan, plan_from_result
 from baselines.sst.soaring import S_CHI, S_E, S_H, S_N, S_V, SAMPLERS, SoaringProblem
-from soaring_env._validation import ConfigError, check_choice, check_int, check_positive
+from soaring_env._validation import ConfigError, check_choice, check_int, check_positive, check_range
 from soaring_env.model import SoaringModel
 from soaring_env.physics.atmosphere import G
 from soaring_env.primitives import COL_AIRSPEED, COL_CHI_DOT_1, COL_CHI_DOT_2
@@ -112,6 +112,11 @@ class ReferenceConfig:
         model's bank and stall limits); for tests and ablations.
     :param region_size: side of the squares of the beam's diversity quota [m].
     :param region_quota: nodes per square taken first into the beam (0: no quota).
+    :param progress_weight: adds ``progress_weight x eps x d`` (d: distance to the goal region [m],
+        eps: the cheapest still-air cost per metre) to the ranking, so that of nodes the ranking
+        rates alike (circling high in lift vs gliding on: both keep J + H) the nearer goes first --
+        needed over long distances (the cross-country task); 0 (default): the goal-reaching
+        references as published. Ranking only, never pruning: the search stays admissible.
     :param planner_iterations: for the primitives (:func:`~baselines.reference.compute_reference`;
         :func:`search` takes its seeds as arguments): random expansions of a deterministic run of
         the soaring SST (seed 0, :func:`baselines.sst.plan_soaring`) whose plan seeds the search
@@ -133,8 +138,10 @@ class ReferenceConfig:
     region_size: float = 200.0
     region_quota: int = 8
     planner_iterations: int = 0
+    progress_weight: float = 0.0
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "progress_weight", check_range("progress_weight", self.progress_weight, 0.0, 100.0))
         check_positive("region_size", self.region_size)
         check_int("region_quota", self.region_quota, 0)
         check_int("planner_iterations", self.planner_iterations, 0)
@@ -270,6 +277,7 @@ def search(
     *,
     seed_controls: Sequence[np.ndarray] = (),
     progress: Callable[[int, int], None] | None = None,
+    battery: float = math.inf,
 ) -> SearchResult:
     """Run the reference search from the scenario's start (see the module docstring).
 
@@ -284,6 +292,10 @@ def search(
         the beam at every depth, e.g. the best plan in the field without thermals: the search then
         never does worse than flying any of them.
     :param progress: called as ``progress(done, total)`` in units of depth x stage.
+    :param battery: motor energy budget [J/kg] (the cross-country task's): a path whose summed
+        fuel + kinetic charge C' reaches it before the goal ends there (as ``"battery_empty"`` in the
+        env), so only children with C' below it are kept; the goal edge itself may cross it, as in
+        the env.
     :returns: the best plan found (unsolved if none).
     """
     if not isinstance(model, SoaringModel):
@@ -302,7 +314,9 @@ def search(
         widths.append(w)
         w *= 2
     widths.append(cfg.beam_width)
-    ctx = _Context.make(model, problem, sampler, ctrls, cfg)
+    if not (isinstance(battery, (int, float)) and battery > 0.0) or math.isnan(battery):
+        raise ConfigError(f"battery={battery!r} must be a number > 0 J/kg (math.inf: no battery)")
+    ctx = _Context.make(model, problem, sampler, ctrls, cfg, float(battery))
     best: tuple[float, np.ndarray, np.ndarray] | None = None
     rollouts = depth = 0
     for k, width in enumerate(widths):
@@ -350,10 +364,17 @@ class _Context:
     per_metre: float
     lift: np.ndarray
     speed_keys: np.ndarray
+    battery: float
 
     @classmethod
     def make(
-        cls, model: SoaringModel, problem: SoaringProblem, sampler: str, ctrls: np.ndarray, cfg: ReferenceConfig
+        cls,
+        model: SoaringModel,
+        problem: SoaringProblem,
+        sampler: str,
+        ctrls: np.ndarray,
+        cfg: ReferenceConfig,
+        battery: float = math.inf,
     ) -> _Context:
         g = model.scenario.require_goal()
         if sampler == "continuous":
@@ -373,6 +394,7 @@ class _Context:
             per_metre=still_air_cost_per_metre(model, ctrls),
             lift=thermal_values(model, ctrls),
             speed_keys=speed_keys,
+            battery=battery,
         )
 
 
@@ -431,7 +453,12 @@ def _beam(
                     seed_child[q] = c if out[c] == EDGE_VALID else -1
         forced = np.array(sorted({c for c in seed_child if c >= 0}), dtype=np.int64)
         # 3. valid children; admissible pruning (module docstring)
-        keep = np.flatnonzero((out == EDGE_VALID) & (j - G * (h_cap - end[:, S_H]) < best_cost))
+        valid = (out == EDGE_VALID) & (j - G * (h_cap - end[:, S_H]) < best_cost)
+        if ctx.battery != math.inf:  # C' = J + g (h - h_0): the motor energy so far
+            charged = j + G * (end[:, S_H] - root[S_H]) < ctx.battery
+            valid &= charged
+            forced = forced[charged[forced]]
+        keep = np.flatnonzero(valid)
         keep = np.union1d(keep, forced)
         if depth == cfg.max_edges or len(keep) == 0:
             break
@@ -439,6 +466,8 @@ def _beam(
         jk = j[keep]
         d_goal = np.maximum(np.hypot(ce[:, S_N] - gn, ce[:, S_E] - ge) - gr, 0.0)
         rank = jk + _cost_to_go_estimate(ce, d_goal, per_metre, g_top, lift, (gn, ge))
+        if cfg.progress_weight:
+            rank = rank + cfg.progress_weight * per_metre * d_goal
         key = _cell_keys(ce, cfg, ctx)
         # merge children of one cell: the lowest J (then lowest rank, then first) survives
         order = np.lexsort((np.arange(len(keep)), rank, jk, key))
