@@ -11,6 +11,7 @@ interchangeable. Execution and scoring always go through ``env.step``.
 * :class:`HeuristicAgent` -- a hand-written rule, no search: circle while the updraft measured at
   the aircraft is strong and height is still useful, otherwise turn towards the goal and pick the
   path angle that brings the aircraft down (or up) to the goal region on arrival.
+* :class:`ReplayAgent` -- a fixed plan of env actions (the reference search's), one per step.
 * :class:`SSTPlannerAgent` -- :class:`baselines.sst.SSTAgent` (plans on reset with the model the
   env exposes; knows the thermal field) behind this interface, seeded per episode.
 * :class:`PPOAgent` -- a saved stable-baselines3 / sb3-contrib model with the JSON configuration it
@@ -31,7 +32,7 @@ import numpy as np
 from soaring_env._validation import ConfigError
 from soaring_env.primitives import COL_AIRSPEED, COL_CHI_DOT_1, COL_CHI_DOT_2, COL_FAMILY, COL_GAMMA, SPIRAL
 
-__all__ = ["Agent", "HeuristicAgent", "PPOAgent", "RandomAgent", "SSTPlannerAgent", "action_mask_of"]
+__all__ = ["Agent", "HeuristicAgent", "PPOAgent", "RandomAgent", "ReplayAgent", "SSTPlannerAgent", "action_mask_of"]
 
 
 @runtime_checkable
@@ -278,6 +279,33 @@ class HeuristicAgent:
         if self._env is None:
             raise RuntimeError(f"{type(self).__name__}.predict called before reset(env, seed)")
         return self._env
+
+
+class ReplayAgent:
+    """Fly a fixed sequence of env actions (a plan, e.g. the reference search's), one per step.
+
+    :param actions: the env actions in order.
+    :param name: label in results.
+    """
+
+    def __init__(self, actions: Any, *, name: str = "replay") -> None:
+        self.name = name
+        self._actions = list(actions)
+        self._i = 0
+
+    def reset(self, env: gym.Env, seed: int | None = None) -> None:
+        """Start the plan from its first action (``env`` must be reset to the plan's start)."""
+        self._i = 0
+
+    def predict(
+        self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True
+    ) -> tuple[Any, None]:
+        """The plan's next action; a RuntimeError once the plan is used up (the episode outlived it)."""
+        if self._i >= len(self._actions):
+            raise RuntimeError(f"{self.name}: the plan of {len(self._actions)} actions is used up, the episode goes on")
+        a = self._actions[self._i]
+        self._i += 1
+        return a, None
 
 
 class PPOAgent:

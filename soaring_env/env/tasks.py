@@ -198,11 +198,11 @@ _XC_DOC = """Energy-limited cross-country: reach a goal 8-15 km away on a batter
 
     ## Description
 
-    A goal region (radius 300 m, centred at 400 m) lies 8-15 km away, the start at 200-400 m, across a field of 1-2 thermals
-    per km (:func:`~soaring_env.scenario.make_cross_country_scenario`). The motor runs on a battery
-    of ``battery_fraction`` (0.25) x the energy of the cheapest powered flight straight to the goal
-    (level, best L/D = 22.8, still air): success needs climbs in lift. The task of Notter et al.'s
-    cross-country soaring, on this project's model.
+    A goal region (radius 300 m, centred at 400 m) lies 8-15 km away (the start at 200-400 m),
+    across a field of 1-2 thermals per km (:func:`~soaring_env.scenario.make_cross_country_scenario`).
+    The motor runs on a battery of ``battery_fraction`` (0.25) x the energy of the cheapest powered
+    flight straight to the goal (level, best L/D = 22.8, still air): success needs climbs in lift.
+    The task of Notter et al.'s cross-country soaring, on this project's model.
 
     ## Action Space
 

@@ -1,0 +1,239 @@
+"""Results of the soaring tasks: the reference search, the heuristic, a direct flyer and a random agent
+on the held-out scenarios of every task id (``climb-10000 ...``, ``xc-10000 ...``).
+
+Every agent flies through ``env.step``; the reference's plan too (replayed action by action: its
+predicted energy and the env's agree bit for bit, which :func:`run_task_job` checks). Scores:
+
+* thermal climb -- the energy gained ``-energy_spent`` [J/kg] over the time limit, and its fraction
+  of the reference search's (:func:`baselines.reference.horizon.energy_search`) in that scenario;
+* cross-country -- success (the goal reached before the battery is empty), the battery left
+  [fraction of the budget] and the energy spent [J/kg]; the reference is the goal-reaching beam
+  search with the battery as a budget (:func:`baselines.reference.beam.search`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import statistics
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from baselines.agents import HeuristicAgent, RandomAgent, ReplayAgent
+from baselines.evaluation import run_episode
+from baselines.reference.beam import ReferenceConfig, search
+from baselines.reference.horizon import HorizonConfig, energy_search
+from soaring_env._validation import ConfigError, check_choice
+from soaring_env.scenario import get_scenario, heldout_names
+
+#: The task ids and their scenario families.
+TASK_FAMILIES = {
+    "soaring/ThermalClimb-v0": "climb",
+    "soaring/ThermalClimbContinuous-v0": "climb",
+    "soaring/CrossCountry-v0": "xc",
+    "soaring/CrossCountryContinuous-v0": "xc",
+}
+AGENTS = ("reference", "heuristic", "direct", "random")
+#: Beam width of the tasks' reference searches (the accuracy knob; ``--beam-width``).
+DEFAULT_BEAM_WIDTH = 500
+#: The cross-country reference's continuous control set for Ts = 10 s: the beam's grid of airspeeds
+#: [m/s] x course changes per step [deg] (clipped to the bank and stall limits), level and at the
+#: zero-thrust glide angle; and the ranking's progress weight (see ReferenceConfig.progress_weight).
+XC_SPEEDS = (12.5, 15.0, 18.0, 22.0)
+XC_TURNS_DEG = (-300.0, -150.0, -60.0, 0.0, 60.0, 150.0, 300.0)
+XC_PROGRESS_WEIGHT = 0.5
+
+
+@dataclass(frozen=True)
+class TaskJob:
+    """One episode: ``agent`` on held-out ``scenario`` of ``env_id`` (seed: the env's and the agent's)."""
+
+    env_id: str
+    scenario: str
+    agent: str
+    seed: int
+    beam_width: int = DEFAULT_BEAM_WIDTH
+
+    def key(self) -> str:
+        return f"{self.env_id}|{self.scenario}|{self.agent}|{self.seed}"
+
+    def settings(self) -> dict[str, Any]:
+        return {"beam_width": self.beam_width} if self.agent == "reference" else {}
+
+
+def task_jobs(
+    env_ids: Sequence[str], n_scenarios: int, agents: Sequence[str], beam_width: int = DEFAULT_BEAM_WIDTH
+) -> list[TaskJob]:
+    """Every (task id, held-out scenario, agent) job, seed 0."""
+    for e in env_ids:
+        check_choice("env_id", e, tuple(TASK_FAMILIES))
+    for a in agents:
+        check_choice("agent", a, AGENTS)
+    jobs = []
+    for env_id in env_ids:
+        fam = TASK_FAMILIES[env_id]
+        for sc in heldout_names(n_scenarios, family=fam):
+            for agent in agents:
+                if agent == "direct" and fam != "xc":
+                    continue  # no goal to fly to
+                jobs.append(TaskJob(env_id, sc, agent, 0, beam_width))
+    return jobs
+
+
+def reference_config(env: gym.Env, beam_width: int) -> HorizonConfig | ReferenceConfig:
+    """The reference search settings of a task env."""
+    base: Any = env.unwrapped
+    if not base.has_goal:
+        return HorizonConfig(beam_width=beam_width)
+    steps = int(round(base.config.time_limit / base.library.duration))
+    kw: dict[str, Any] = {"beam_width": beam_width, "start_width": beam_width, "max_edges": steps}
+    if base.continuous:
+        kw.update(speeds=XC_SPEEDS, turns_deg=XC_TURNS_DEG, gammas_deg=(0.0,))
+    return ReferenceConfig(**kw, progress_weight=XC_PROGRESS_WEIGHT)
+
+
+def reference_plan(env: gym.Env, beam_width: int) -> tuple[list[Any], dict[str, Any]]:
+    """The reference search's plan for the scenario ``env`` was just reset to: (env actions, stats)."""
+    base: Any = env.unwrapped
+    sampler = "continuous" if base.continuous else "primitive"
+    cfg = reference_config(env, beam_width)
+    t0 = time.perf_counter()
+    stats: dict[str, Any]
+    if isinstance(cfg, HorizonConfig):
+        r = energy_search(base.model, sampler, base.config.time_limit, cfg)
+        actions = list(r.actions)
+        predicted = r.energy
+        stats = {"rollouts": r.rollouts, "n_controls": r.n_controls, "found": math.isfinite(r.energy)}
+    else:
+        s = search(base.model, sampler, cfg, battery=base.battery)
+        actions = list(s.plan.actions)
+        predicted = -s.cost
+        stats = {"rollouts": s.rollouts, "n_controls": s.n_controls, "found": bool(s.plan.solved)}
+    stats.update(seconds=time.perf_counter() - t0, predicted_energy=predicted, settings=dataclasses.asdict(cfg))
+    return actions, stats
+
+
+def run_task_job(job: TaskJob) -> dict[str, Any]:
+    """One episode record (see the module docstring); module level, so it runs in worker processes."""
+    env = gym.make(job.env_id)
+    sc = get_scenario(job.scenario)
+    base: Any = env.unwrapped
+    ref_stats: dict[str, Any] | None = None
+    agent: Any
+    if job.agent == "reference":
+        env.reset(seed=job.seed, options={"scenario": sc})
+        actions, ref_stats = reference_plan(env, job.beam_width)
+        if not ref_stats["found"]:
+            env.close()
+            return {**_ids(job), "found": False, "reference": ref_stats}
+        agent = ReplayAgent(actions, name="reference")
+    elif job.agent == "heuristic":
+        agent = HeuristicAgent()
+    elif job.agent == "direct":
+        agent = HeuristicAgent(lift_threshold=math.inf, name="direct")  # never circles
+    else:
+        agent = RandomAgent()
+    rec = run_episode(env, agent, sc, job.seed, keep_path=True)
+    rec.update(_ids(job))
+    rec["found"] = True
+    rec["energy_gained"] = -rec["energy_spent"]
+    if base.has_battery:
+        rec["battery_left"] = max(float(base.battery_left), 0.0) / float(base.battery)  # the last edge may overdraw
+    if ref_stats is not None:
+        rec["reference"] = ref_stats
+        if ref_stats["predicted_energy"] != rec["energy_gained"]:
+            raise RuntimeError(
+                f"{job.key()}: the reference plan predicted {ref_stats['predicted_energy']!r} J/kg, "
+                f"env.step gave {rec['energy_gained']!r}"
+            )
+    env.close()
+    return rec
+
+
+def _ids(job: TaskJob) -> dict[str, Any]:
+    return {"env_id": job.env_id, "scenario": job.scenario, "agent": job.agent, "seed": job.seed}
+
+
+def summarize(episodes: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """One row per (task id, agent): episodes, successes, median energy gained, median fraction of
+    the reference's energy (climb; per scenario, where the reference gained energy), battery left."""
+    ref = {
+        (e["env_id"], e["scenario"]): e["energy_gained"]
+        for e in episodes
+        if e["agent"] == "reference" and e.get("found")
+    }
+    rows = []
+    for env_id in TASK_FAMILIES:
+        for agent in AGENTS:
+            eps = [e for e in episodes if e["env_id"] == env_id and e["agent"] == agent]
+            if not eps:
+                continue
+            flown = [e for e in eps if e.get("found", True)]
+            gained = [e["energy_gained"] for e in flown]
+            frac = [
+                e["energy_gained"] / ref[(env_id, e["scenario"])]
+                for e in flown
+                if ref.get((env_id, e["scenario"]), 0.0) > 0.0
+            ]
+            battery = [e["battery_left"] for e in flown if "battery_left" in e]
+            outcomes: dict[str, int] = {}
+            for e in flown:
+                outcomes[e["outcome"]] = outcomes.get(e["outcome"], 0) + 1
+            rows.append(
+                {
+                    "env_id": env_id,
+                    "agent": agent,
+                    "episodes": len(eps),
+                    "no_plan": len(eps) - len(flown),
+                    "success": sum(bool(e["success"]) for e in flown),
+                    "energy_gained_median": statistics.median(gained) if gained else math.nan,
+                    "fraction_of_reference_median": statistics.median(frac) if frac else math.nan,
+                    "battery_left_median": statistics.median(battery) if battery else math.nan,
+                    "outcomes": outcomes,
+                }
+            )
+    return rows
+
+
+def markdown_table(rows: Sequence[Mapping[str, Any]]) -> str:
+    """The summary as a markdown table (energies in kJ/kg)."""
+
+    def num(v: float, fmt: str, unit: str = "") -> str:
+        return "—" if v is None or (isinstance(v, float) and math.isnan(v)) else format(v, fmt) + unit
+
+    lines = [
+        "| task id | agent | episodes | success | energy gained, median [kJ/kg] | of the reference's (median) "
+        "| battery left (median) | outcomes |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        xc = TASK_FAMILIES[r["env_id"]] == "xc"
+        flown = r["episodes"] - r["no_plan"]
+        succ = f"{r['success']}/{flown}" if xc else "—"
+        if r["no_plan"]:
+            succ += f" ({r['no_plan']} without a plan)" if xc else f"{r['no_plan']} without a plan"
+        outcomes = ", ".join(f"{k} {v}" for k, v in sorted(r["outcomes"].items()))
+        lines.append(
+            f"| `{r['env_id'].split('/')[1]}` | {r['agent']} | {r['episodes']} | {succ} | "
+            f"{num(r['energy_gained_median'] / 1000.0, '.2f')} | "
+            f"{'—' if xc else num(r['fraction_of_reference_median'] * 100.0, '.0f', ' %')} | "
+            f"{num(r['battery_left_median'] * 100.0, '.0f', ' %') if xc else '—'} | {outcomes} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def check_episodes(data: Any, where: str) -> list[dict[str, Any]]:
+    """The episode list of a results file, or a ConfigError naming it."""
+    if not isinstance(data, dict) or not isinstance(data.get("episodes"), list):
+        raise ConfigError(f"{where} is not a task results file (no 'episodes' list); move it away and run again")
+    return list(data["episodes"])
+
+
+def path_array(ep: Mapping[str, Any]) -> np.ndarray:
+    """The flown points (M, 3) [north, east, height] of an episode record."""
+    return np.asarray(ep.get("path") or [], dtype=np.float64).reshape(-1, 3)
