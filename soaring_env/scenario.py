@@ -380,12 +380,92 @@ def get_scenario(name: str | os.PathLike[str], random_scenario: Mapping[str, Any
 
 #: Goal radius of random scenarios [m].
 _RANDOM_GOAL_RADIUS = 150.0
+#: Least distance [m] of a random scenario's start and goal centre from the domain's horizontal edges.
+RANDOM_MARGIN = 300.0
+#: Draws a random scenario may try before its keywords are declared unsatisfiable.
+RANDOM_TRIES = 1000
+#: The error of keywords whose draws never fit the domain (after ``RANDOM_TRIES`` tries).
+NO_FIT = "could not draw a scenario that fits the bounds; widen bounds or shorten goal_distance"
 
 
 def check_int_pair(name: str, value: Any, low: int, high: int) -> tuple[int, int]:
     """An ordered pair of integers in [low, high]."""
     a, b = check_pair(name, value, low, high, integer=True)
     return int(a), int(b)
+
+
+def default_random_bounds() -> Bounds:
+    """The flight domain of random scenarios unless ``bounds`` is given: 6 km x 6 km, 1.5 km high."""
+    return Bounds(-3000.0, 3000.0, -3000.0, 3000.0, 1500.0)
+
+
+@dataclass(frozen=True)
+class RandomScenarioSpec:
+    """The validated keywords of :func:`make_scenario` (and of the envs' ``"random"`` mode draws).
+
+    Every range is an ordered pair ``(low, high)`` of finite numbers: ``n_thermals`` integers in
+    [0, ``MAX_RANDOM_THERMALS``], ``strength`` (w* or Gaussian peak) in (0, 20] m/s, ``wind_speed``
+    in [0, 50] m/s, ``goal_distance`` [m] above the goal radius (150 m) and within the domain,
+    ``height`` [m] inside (0, ``bounds.height_max``]; ``zi`` [m] > 0. A bad one raises a
+    :class:`ConfigError` naming it. ``bounds=None`` is :func:`default_random_bounds`.
+    """
+
+    n_thermals: tuple[int, int] = (1, 5)
+    strength: tuple[float, float] = (1.5, 3.5)
+    wind_speed: tuple[float, float] = (0.0, 4.0)
+    goal_distance: tuple[float, float] = (1500.0, 3500.0)
+    height: tuple[float, float] = (200.0, 600.0)
+    model: str = "allen"
+    zi: float = 1400.0
+    drift: bool = False
+    bounds: Bounds | None = None
+    name: str = "random"
+
+    def __post_init__(self) -> None:
+        bounds = default_random_bounds() if self.bounds is None else self.bounds
+        check_type("bounds", bounds, Bounds)
+        object.__setattr__(self, "bounds", bounds)
+        object.__setattr__(self, "n_thermals", check_int_pair("n_thermals", self.n_thermals, 0, MAX_RANDOM_THERMALS))
+        strength = check_pair("strength", self.strength, 0.0, 20.0)
+        if strength[0] <= 0.0:
+            raise ConfigError(f"strength={strength!r} must have low > 0 m/s (a thermal's w* or peak is positive)")
+        object.__setattr__(self, "strength", strength)
+        object.__setattr__(self, "wind_speed", check_pair("wind_speed", self.wind_speed, 0.0, 50.0))
+        goal_distance = check_pair("goal_distance", self.goal_distance, _RANDOM_GOAL_RADIUS, math.inf)
+        if goal_distance[0] <= _RANDOM_GOAL_RADIUS:
+            raise ConfigError(
+                f"goal_distance={goal_distance!r} must have low > {_RANDOM_GOAL_RADIUS:g} m (the goal radius)"
+            )
+        object.__setattr__(self, "goal_distance", goal_distance)
+        height = check_pair("height", self.height, 0.0, bounds.height_max)
+        if height[0] <= 0.0:
+            raise ConfigError(f"height={height!r} must have low > 0 m (above the ground)")
+        object.__setattr__(self, "height", height)
+        check_type("model", self.model, str)
+        check_choice("model", self.model, THERMAL_MODELS)
+        object.__setattr__(self, "zi", check_positive("zi", self.zi))
+        object.__setattr__(self, "drift", check_bool("drift", self.drift))
+        check_type("name", self.name, str)
+        if goal_distance[1] > 0.9 * math.hypot(self.span_north, self.span_east):
+            raise ConfigError(f"goal_distance={goal_distance!r} does not fit in the domain {bounds!r}")
+
+    @property
+    def domain(self) -> Bounds:
+        """``bounds`` (never None after validation)."""
+        assert self.bounds is not None
+        return self.bounds
+
+    @property
+    def span_north(self) -> float:
+        """North extent of the domain [m]."""
+        b = self.domain
+        return b.north_max - b.north_min
+
+    @property
+    def span_east(self) -> float:
+        """East extent of the domain [m]."""
+        b = self.domain
+        return b.east_max - b.east_min
 
 
 def make_scenario(
@@ -406,40 +486,33 @@ def make_scenario(
 
     Thermal count, positions (in the band between start and goal, so that using them is a real
     choice), strengths w* [m/s], wind speed [m/s] and direction, start heading and height, goal
-    bearing, distance [m] and height are all drawn uniformly from the given ranges.
+    bearing, distance [m] and height are all drawn uniformly from the given ranges; draws whose
+    start or goal lies within ``RANDOM_MARGIN`` of the domain's edges are drawn again.
 
-    Every range is an ordered pair ``(low, high)`` of finite numbers: ``n_thermals`` integers in
-    [0, ``MAX_RANDOM_THERMALS``], ``strength`` in (0, 20] m/s, ``wind_speed`` in [0, 50] m/s,
-    ``goal_distance`` above the goal radius (150 m) and within the domain, ``height`` inside
-    (0, ``bounds.height_max``]; a bad one raises a :class:`ConfigError` naming it.
+    This is random-scenario distribution v1, one scenario at a time: the held-out and validation
+    scenarios ``"random-<seed>"`` are drawn with it. The envs' ``"random"`` mode draws the same
+    distribution in batches (:mod:`soaring_env.env.scenario_batch`, v2: another use of the stream).
+    The keywords and their ranges are those of :class:`RandomScenarioSpec` (a bad one raises a
+    :class:`ConfigError` naming it).
     """
     check_type("rng", rng, np.random.Generator)
-    if bounds is None:
-        bounds = Bounds(-3000.0, 3000.0, -3000.0, 3000.0, 1500.0)
-    check_type("bounds", bounds, Bounds)
-    n_thermals = check_int_pair("n_thermals", n_thermals, 0, MAX_RANDOM_THERMALS)
-    strength = check_pair("strength", strength, 0.0, 20.0)
-    if strength[0] <= 0.0:
-        raise ConfigError(f"strength={strength!r} must have low > 0 m/s (a thermal's w* or peak is positive)")
-    wind_speed = check_pair("wind_speed", wind_speed, 0.0, 50.0)
-    goal_distance = check_pair("goal_distance", goal_distance, _RANDOM_GOAL_RADIUS, math.inf)
-    if goal_distance[0] <= _RANDOM_GOAL_RADIUS:
-        raise ConfigError(
-            f"goal_distance={goal_distance!r} must have low > {_RANDOM_GOAL_RADIUS:g} m (the goal radius)"
-        )
-    height = check_pair("height", height, 0.0, bounds.height_max)
-    if height[0] <= 0.0:
-        raise ConfigError(f"height={height!r} must have low > 0 m (above the ground)")
-    check_type("model", model, str)
-    check_choice("model", model, THERMAL_MODELS)
-    zi = check_positive("zi", zi)
-    drift = check_bool("drift", drift)
-    check_type("name", name, str)
-    span_n = bounds.north_max - bounds.north_min
-    span_e = bounds.east_max - bounds.east_min
-    if goal_distance[1] > 0.9 * math.hypot(span_n, span_e):
-        raise ConfigError(f"goal_distance={goal_distance!r} does not fit in the domain {bounds!r}")
-    for _ in range(1000):
+    spec = RandomScenarioSpec(
+        n_thermals=n_thermals,
+        strength=strength,
+        wind_speed=wind_speed,
+        goal_distance=goal_distance,
+        height=height,
+        model=model,
+        zi=zi,
+        drift=drift,
+        bounds=bounds,
+        name=name,
+    )
+    bounds = spec.domain
+    n_thermals, strength, wind_speed = spec.n_thermals, spec.strength, spec.wind_speed
+    goal_distance, height = spec.goal_distance, spec.height
+    span_n, span_e = spec.span_north, spec.span_east
+    for _ in range(RANDOM_TRIES):
         dist = rng.uniform(*goal_distance)
         bearing = rng.uniform(-math.pi, math.pi)
         cn = 0.5 * (bounds.north_min + bounds.north_max)
@@ -463,7 +536,7 @@ def make_scenario(
         ws = rng.uniform(*wind_speed)
         wd = rng.uniform(-math.pi, math.pi)
         inside = bounds.contains(np.array([sn, gn]), np.array([se, ge]), np.array([sh, gh]))
-        margin = 300.0
+        margin = RANDOM_MARGIN
         if (
             not inside.all()
             or min(
@@ -482,15 +555,15 @@ def make_scenario(
         return Scenario(
             field=WindField(
                 thermals=tuple(thermals),
-                model=model,
-                zi=zi,
+                model=spec.model,
+                zi=spec.zi,
                 wind_north=ws * math.cos(wd),
                 wind_east=ws * math.sin(wd),
-                drift=drift,
+                drift=spec.drift,
             ),
             start=(sn, se, chi, sh),
             goal=GoalRegion(north=gn, east=ge, height=gh, radius=_RANDOM_GOAL_RADIUS),
             bounds=bounds,
-            name=name,
+            name=spec.name,
         )
-    raise ConfigError("could not draw a scenario that fits the bounds; widen bounds or shorten goal_distance")
+    raise ConfigError(NO_FIT)

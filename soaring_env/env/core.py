@@ -18,9 +18,10 @@ from gymnasium import spaces
 from soaring_env._validation import ConfigError
 from soaring_env.env._kernels import CRASH, FLYING, GOAL, OUT_OF_BOUNDS, post_step
 from soaring_env.env.config import ENERGY_SCALE, SoaringEnvConfig, choose_scenario, make_config, resolve_scenario
-from soaring_env.env.observation import observation_layout, observe_batch, scenario_params
+from soaring_env.env.observation import N_PARAMS, observation_layout, observe_batch, scenario_params
+from soaring_env.env.scenario_batch import ScenarioSampler, scenario_from_row
 from soaring_env.model import OUTCOMES, SoaringModel
-from soaring_env.physics.thermals import WindField
+from soaring_env.physics.thermals import PACKED_COLUMNS, WindField
 from soaring_env.primitives import N_PRIMITIVES, PrimitiveLibrary
 from soaring_env.scenario import Scenario, get_scenario
 
@@ -131,6 +132,9 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
     ``reset(options={"scenario": s})`` pins a scenario for that episode: a Scenario, its dict,
     ``"random"``, or a name of :func:`~soaring_env.scenario.get_scenario` (``"paper"``,
     ``"random-<seed>"``, a path to a scenario ``.json`` file) -- the same forms as ``scenario=``.
+    Random scenarios follow distribution v2 (:mod:`soaring_env.env.scenario_batch`: the ranges of
+    :func:`~soaring_env.scenario.make_scenario`, drawn as the batched vector env draws them, so
+    ``gym.make_vec(..., num_envs=n)`` equals n single envs); ``"random-<seed>"`` names stay v1.
 
     ## Episode End
 
@@ -220,6 +224,8 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         self._dist = np.zeros(1)
         self._ctrl = np.zeros((1, 4))
         self._x0 = np.zeros((1, 4))
+        # "random" draws (distribution v2) from env.np_random; set up at the first draw
+        self._sampler: ScenarioSampler | None = None
         self.scenario: Scenario = self._fixed_scenario or get_scenario("paper")
         self._install(self.scenario)
         self._start_episode()
@@ -272,6 +278,22 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         self._th = np.ascontiguousarray(sc.field.packed[None, :, :])
         self._nth = np.array([len(sc.field.thermals)], dtype=np.int64)
         self._bank_ok = self.model.bank_ok()
+
+    def _draw_random(self) -> Scenario:
+        """A new random scenario from ``self.np_random``: ``draw_scenario_arrays(np_random, 1)``, the
+        draw env ``i`` of a vector env makes from its generator."""
+        sampler = self._sampler
+        if sampler is None:
+            sampler = self._sampler = ScenarioSampler(self.config.random_scenario)
+            self._drawn = (
+                np.empty((1, N_PARAMS)),
+                np.zeros((1, max(1, sampler.max_thermals), PACKED_COLUMNS)),
+                np.zeros(1, dtype=np.int64),
+                np.empty((1, 4)),
+            )
+        prm, th, nth, start = self._drawn
+        sampler.draw_from(_ZERO_ROW, self.np_random, prm, th, nth, start)
+        return scenario_from_row(sampler.spec, prm[0], th[0, : nth[0]], start[0])
 
     def _start_episode(self) -> tuple[np.ndarray, dict[str, Any]]:
         sc = self.scenario
@@ -327,7 +349,9 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
         """Start an episode; ``options={"scenario": Scenario | name | dict | "random"}`` pins a scenario."""
         super().reset(seed=seed)
-        sc = choose_scenario(options, self._fixed_scenario, self.config.random_scenario, lambda: self.np_random)
+        sc = choose_scenario(options, self._fixed_scenario, self.config.random_scenario)
+        if sc is None:
+            sc = self._draw_random()
         if sc is not self.scenario:
             self._install(sc)
         obs, info = self._start_episode()
