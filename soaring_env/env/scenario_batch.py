@@ -42,10 +42,20 @@ from numba.typed import List
 
 from soaring_env import _jit  # noqa: F401  (the package-wide kernel cache key, before any kernel)
 from soaring_env._validation import ConfigError, check_int, check_type
-from soaring_env.env.observation import N_PARAMS, P_DVX, P_DVY, P_GE, P_GH, P_GN, P_WE, P_WN, scenario_params
+from soaring_env.env.observation import (
+    N_PARAMS,
+    P_DVX,
+    P_DVY,
+    P_GE,
+    P_GH,
+    P_GN,
+    P_GR,
+    P_WE,
+    P_WN,
+    scenario_params,
+)
 from soaring_env.physics.thermals import PACKED_COLUMNS, Thermal, WindField
 from soaring_env.scenario import (
-    _RANDOM_GOAL_RADIUS,
     NO_FIT,
     RANDOM_MARGIN,
     RANDOM_TRIES,
@@ -329,7 +339,7 @@ def scenario_from_row(
         drift=spec.drift,
     )
     goal = GoalRegion(
-        north=float(params[P_GN]), east=float(params[P_GE]), height=float(params[P_GH]), radius=_RANDOM_GOAL_RADIUS
+        north=float(params[P_GN]), east=float(params[P_GE]), height=float(params[P_GH]), radius=float(params[P_GR])
     )
     st = start.tolist()
     return Scenario(field=field, start=(st[0], st[1], st[2], st[3]), goal=goal, bounds=spec.domain, name=spec.name)

@@ -429,7 +429,8 @@ class _SoaringVectorBase(VectorEnv):
             self._dist,
             obs,
         )
-        cost = terms[:, 3].copy()
+        tt = terms.T.copy()  # (6, B): one copy gives every per-term info array below
+        cost = tt[3]
         airspeed = ctrl[:, 0].copy()
         d_new = self._dist.copy()
         reward_terms = t.reward_terms(cost, self._d_goal, d_new, codes)
@@ -445,26 +446,27 @@ class _SoaringVectorBase(VectorEnv):
             truncated = np.zeros(b, dtype=np.bool_)
         else:
             truncated = self.steps >= self.max_episode_steps
-        ones = np.ones(b, dtype=np.bool_)
         infos: dict[str, Any] = {
             "energy_spent": self.energy_spent.copy(),
             "edge_cost": cost,
-            "fuel": terms[:, 0].copy(),
-            "potential": terms[:, 1].copy(),
-            "kinetic": terms[:, 2].copy(),
+            "fuel": tt[0],
+            "potential": tt[1],
+            "kinetic": tt[2],
             "height": new_states[:, 3].copy(),
             "airspeed": airspeed,
-            "bank_angle": terms[:, 4].copy(),
+            "bank_angle": tt[4],
             "updraft": self._upd.copy(),
             "time": t_new.copy(),
             "outcome": _OUTCOMES_OBJ[codes],
             "is_success": codes == GOAL,
             "reward_terms": reward_terms,
         }
-        for key in list(infos):
-            infos["_" + key] = ones.copy()
-        for key in list(infos["reward_terms"]):
-            infos["reward_terms"]["_" + key] = ones.copy()
+        keys, sub = list(infos), list(reward_terms)
+        masks = np.ones((len(keys) + len(sub), b), dtype=np.bool_)  # a row per mask, one allocation
+        for j, key in enumerate(keys):
+            infos["_" + key] = masks[j]
+        for j, key in enumerate(sub, len(keys)):
+            reward_terms["_" + key] = masks[j]
         if autoreset is not None:
             if autoreset.any():
                 rows = np.flatnonzero(autoreset)
