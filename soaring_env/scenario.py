@@ -435,12 +435,89 @@ def check_generator_keywords(generator: Any, kwargs: Mapping[str, Any], field: s
 _RANDOM_GOAL_RADIUS = 150.0
 #: Largest time [s] a random scenario's life-cycle and fluctuation ranges may name (11.6 days).
 MAX_RANDOM_TIME = 1e6
+#: The thermal life-cycle and fluctuation keywords of the random-scenario generators.
+TIME_OPTIONS = ("lifecycle", "rise_time", "birth_window", "strength_variation", "variation_period")
+#: Least distance [m] of a random scenario's start and goal centre from the domain's horizontal edges.
+RANDOM_MARGIN = 300.0
+#: Draws a random scenario may try before its keywords are declared unsatisfiable.
+RANDOM_TRIES = 1000
+#: The error of keywords whose draws never fit the domain (after ``RANDOM_TRIES`` tries).
+NO_FIT = "could not draw a scenario that fits the bounds; widen bounds or shorten goal_distance"
 
 
 def check_int_pair(name: str, value: Any, low: int, high: int) -> tuple[int, int]:
     """An ordered pair of integers in [low, high]."""
     a, b = check_pair(name, value, low, high, integer=True)
     return int(a), int(b)
+
+
+def default_random_bounds() -> Bounds:
+    """The flight domain of random scenarios unless ``bounds`` is given: 6 km x 6 km, 1.5 km high."""
+    return Bounds(-3000.0, 3000.0, -3000.0, 3000.0, 1500.0)
+
+
+@dataclass(frozen=True)
+class RandomScenarioSpec:
+    """The validated keywords of :func:`make_scenario` (and of the envs' ``"random"`` mode draws),
+    without the thermal life-cycle and fluctuation options (:data:`TIME_OPTIONS`).
+
+    Every range is an ordered pair ``(low, high)`` of finite numbers: ``n_thermals`` integers in
+    [0, ``MAX_RANDOM_THERMALS``], ``strength`` (w* or Gaussian peak) in (0, 20] m/s, ``wind_speed``
+    in [0, 50] m/s, ``goal_distance`` [m] above the goal radius (150 m) and within the domain,
+    ``height`` [m] inside (0, ``bounds.height_max``]; ``zi`` [m] > 0. A bad one raises a
+    :class:`ConfigError` naming it. ``bounds=None`` is :func:`default_random_bounds`.
+    """
+
+    n_thermals: tuple[int, int] = (1, 5)
+    strength: tuple[float, float] = (1.5, 3.5)
+    wind_speed: tuple[float, float] = (0.0, 4.0)
+    goal_distance: tuple[float, float] = (1500.0, 3500.0)
+    height: tuple[float, float] = (200.0, 600.0)
+    model: str = "allen"
+    zi: float = 1400.0
+    drift: bool = False
+    bounds: Bounds | None = None
+    name: str = "random"
+
+    def __post_init__(self) -> None:
+        bounds = default_random_bounds() if self.bounds is None else self.bounds
+        check_type("bounds", bounds, Bounds)
+        object.__setattr__(self, "bounds", bounds)
+        n, strength, wind, zi, drift = _check_field_ranges(
+            self.n_thermals, self.strength, self.wind_speed, self.model, self.zi, self.drift, self.name
+        )
+        for k, v in (("n_thermals", n), ("strength", strength), ("wind_speed", wind), ("zi", zi), ("drift", drift)):
+            object.__setattr__(self, k, v)
+        goal_distance = check_pair("goal_distance", self.goal_distance, _RANDOM_GOAL_RADIUS, math.inf)
+        if goal_distance[0] <= _RANDOM_GOAL_RADIUS:
+            raise ConfigError(
+                f"goal_distance={goal_distance!r} must have low > {_RANDOM_GOAL_RADIUS:g} m (the goal radius)"
+            )
+        object.__setattr__(self, "goal_distance", goal_distance)
+        height = check_pair("height", self.height, 0.0, bounds.height_max)
+        if height[0] <= 0.0:
+            raise ConfigError(f"height={height!r} must have low > 0 m (above the ground)")
+        object.__setattr__(self, "height", height)
+        if goal_distance[1] > 0.9 * math.hypot(self.span_north, self.span_east):
+            raise ConfigError(f"goal_distance={goal_distance!r} does not fit in the domain {bounds!r}")
+
+    @property
+    def domain(self) -> Bounds:
+        """``bounds`` (never None after validation)."""
+        assert self.bounds is not None
+        return self.bounds
+
+    @property
+    def span_north(self) -> float:
+        """North extent of the domain [m]."""
+        b = self.domain
+        return b.north_max - b.north_min
+
+    @property
+    def span_east(self) -> float:
+        """East extent of the domain [m]."""
+        b = self.domain
+        return b.east_max - b.east_min
 
 
 def make_scenario(
@@ -466,12 +543,14 @@ def make_scenario(
 
     Thermal count, positions (in the band between start and goal, so that using them is a real
     choice), strengths w* [m/s], wind speed [m/s] and direction, start heading and height, goal
-    bearing, distance [m] and height are all drawn uniformly from the given ranges.
+    bearing, distance [m] and height are all drawn uniformly from the given ranges; draws whose
+    start or goal lies within ``RANDOM_MARGIN`` of the domain's edges are drawn again.
 
-    Every range is an ordered pair ``(low, high)`` of finite numbers: ``n_thermals`` integers in
-    [0, ``MAX_RANDOM_THERMALS``], ``strength`` in (0, 20] m/s, ``wind_speed`` in [0, 50] m/s,
-    ``goal_distance`` above the goal radius (150 m) and within the domain, ``height`` inside
-    (0, ``bounds.height_max``]; a bad one raises a :class:`ConfigError` naming it.
+    This is random-scenario distribution v1, one scenario at a time: the held-out and validation
+    scenarios ``"random-<seed>"`` are drawn with it. The envs' ``"random"`` mode draws the same
+    distribution in batches (:mod:`soaring_env.env.scenario_batch`, v2: another use of the stream)
+    unless a thermal option below is on. The keywords and their ranges are those of
+    :class:`RandomScenarioSpec` (a bad one raises a :class:`ConfigError` naming it).
 
     Thermal life cycle and strength fluctuation (see :mod:`soaring_env.physics.thermals`), both off
     by default; with both off no extra random number is drawn (a seed gives the scenario it gave
@@ -490,26 +569,24 @@ def make_scenario(
     option on (a ConfigError otherwise, rather than being ignored).
     """
     check_type("rng", rng, np.random.Generator)
-    if bounds is None:
-        bounds = Bounds(-3000.0, 3000.0, -3000.0, 3000.0, 1500.0)
-    check_type("bounds", bounds, Bounds)
-    n_thermals, strength, wind_speed, zi, drift = _check_field_ranges(
-        n_thermals, strength, wind_speed, model, zi, drift, name
+    spec = RandomScenarioSpec(
+        n_thermals=n_thermals,
+        strength=strength,
+        wind_speed=wind_speed,
+        goal_distance=goal_distance,
+        height=height,
+        model=model,
+        zi=zi,
+        drift=drift,
+        bounds=bounds,
+        name=name,
     )
-    goal_distance = check_pair("goal_distance", goal_distance, _RANDOM_GOAL_RADIUS, math.inf)
-    if goal_distance[0] <= _RANDOM_GOAL_RADIUS:
-        raise ConfigError(
-            f"goal_distance={goal_distance!r} must have low > {_RANDOM_GOAL_RADIUS:g} m (the goal radius)"
-        )
-    height = check_pair("height", height, 0.0, bounds.height_max)
-    if height[0] <= 0.0:
-        raise ConfigError(f"height={height!r} must have low > 0 m (above the ground)")
     time_kw = _check_time_options(lifecycle, rise_time, birth_window, strength_variation, variation_period)
-    span_n = bounds.north_max - bounds.north_min
-    span_e = bounds.east_max - bounds.east_min
-    if goal_distance[1] > 0.9 * math.hypot(span_n, span_e):
-        raise ConfigError(f"goal_distance={goal_distance!r} does not fit in the domain {bounds!r}")
-    for _ in range(1000):
+    bounds = spec.domain
+    n_thermals, strength, wind_speed = spec.n_thermals, spec.strength, spec.wind_speed
+    goal_distance, height = spec.goal_distance, spec.height
+    span_n, span_e = spec.span_north, spec.span_east
+    for _ in range(RANDOM_TRIES):
         dist = rng.uniform(*goal_distance)
         bearing = rng.uniform(-math.pi, math.pi)
         cn = 0.5 * (bounds.north_min + bounds.north_max)
@@ -532,7 +609,7 @@ def make_scenario(
             thermals.append(Thermal(north=tn, east=te, strength=rng.uniform(*strength)))
         wn, we = _draw_wind(rng, wind_speed)
         inside = bounds.contains(np.array([sn, gn]), np.array([se, ge]), np.array([sh, gh]))
-        margin = 300.0
+        margin = RANDOM_MARGIN
         if (
             not inside.all()
             or min(
@@ -553,18 +630,18 @@ def make_scenario(
         return Scenario(
             field=WindField(
                 thermals=tuple(thermals),
-                model=model,
-                zi=zi,
+                model=spec.model,
+                zi=spec.zi,
                 wind_north=wn,
                 wind_east=we,
-                drift=drift,
+                drift=spec.drift,
             ),
             start=(sn, se, chi, sh),
             goal=GoalRegion(north=gn, east=ge, height=gh, radius=_RANDOM_GOAL_RADIUS),
             bounds=bounds,
-            name=name,
+            name=spec.name,
         )
-    raise ConfigError("could not draw a scenario that fits the bounds; widen bounds or shorten goal_distance")
+    raise ConfigError(NO_FIT)
 
 
 _Range = tuple[float, float]

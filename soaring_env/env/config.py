@@ -54,11 +54,12 @@ class SoaringEnvConfig:
     :param scenario: ``"paper"`` (default: the paper's figure-2 setting, one thermal between start
         and goal), any other name of :func:`soaring_env.scenario.get_scenario` (``"random-<seed>"``,
         a path to a scenario ``.json`` file), ``"random"`` (a new scenario drawn from
-        ``env.np_random`` with :func:`soaring_env.scenario.make_scenario` at every reset), a
+        ``env.np_random`` at every reset: distribution v2 of :mod:`soaring_env.env.scenario_batch`,
+        the ranges of :func:`soaring_env.scenario.make_scenario`), a
         :class:`~soaring_env.scenario.Scenario`, or its dict form. A path is stored as a string.
-    :param random_scenario: keyword arguments for :func:`~soaring_env.scenario.make_scenario` in
-        ``"random"`` mode and for ``"random-<seed>"`` names (thermal count, strength and wind
-        ranges, bounds, ...).
+    :param random_scenario: keyword arguments of :func:`~soaring_env.scenario.make_scenario` for
+        ``"random"`` mode (v2 draws) and for ``"random-<seed>"`` names (v1 draws): thermal count,
+        strength and wind ranges, bounds, ...
     :param duration: primitive duration Ts [s]: one env step flies Ts seconds.
     :param n_points: output points per primitive N (events are detected on these points).
     :param aircraft: aircraft and thrust model (default: Tempest UAS, ``"trim"`` thrust).
@@ -227,15 +228,15 @@ def choose_scenario(
     options: Mapping[str, Any] | None,
     fixed: Scenario | None,
     random_kwargs: Mapping[str, Any],
-    rng: Callable[[], np.random.Generator],
     generator: Callable[..., Scenario] = make_scenario,
-) -> Scenario:
-    """The scenario of a new episode.
+) -> Scenario | None:
+    """The scenario of a new episode, or ``None`` for a new random one.
 
     ``options["scenario"]`` (anything :class:`SoaringEnvConfig` takes as ``scenario``) wins; else
-    the configured ``fixed`` scenario; else (``"random"`` mode) a scenario drawn from ``rng()`` with
-    ``generator`` (default :func:`~soaring_env.scenario.make_scenario`) and ``random_kwargs``
-    (also the keywords of that generator's ``<family>-<seed>`` names).
+    the configured ``fixed`` scenario; else (``"random"`` mode, or ``options={"scenario": "random"}``)
+    ``None``: the env draws from its own generator (``generator`` with ``random_kwargs``; goal
+    reaching: distribution v2 of :mod:`soaring_env.env.scenario_batch`). ``random_kwargs`` are also
+    the keywords of that generator's ``<family>-<seed>`` names.
     """
     spec: Any = None
     if options:
@@ -246,9 +247,5 @@ def choose_scenario(
             raise ConfigError(f"unknown reset option(s) {unknown!r}; allowed: 'scenario'")
         spec = options.get("scenario")
     if spec is not None:
-        pinned = resolve_scenario(spec, random_kwargs, generator)  # None for "random"
-        if pinned is not None:
-            return pinned
-    elif fixed is not None:
-        return fixed
-    return generator(rng(), **dict(random_kwargs))
+        return resolve_scenario(spec, random_kwargs, generator)  # None for "random"
+    return fixed

@@ -22,13 +22,15 @@ from soaring_env.env.observation import (
     HISTORY_FEATURES,
     N_BASE,
     N_GOAL,
+    N_PARAMS,
     observation_layout,
     observe_batch,
     scenario_params,
     sensor_noise,
 )
+from soaring_env.env.scenario_batch import ScenarioSampler, batched_draws, scenario_from_row
 from soaring_env.model import BATTERY_EMPTY, OUTCOMES, SoaringModel
-from soaring_env.physics.thermals import WindField
+from soaring_env.physics.thermals import PACKED_COLUMNS, WindField
 from soaring_env.primitives import N_PRIMITIVES, ControlEnvelope, PrimitiveLibrary
 from soaring_env.scenario import Scenario, get_scenario, make_scenario
 
@@ -141,6 +143,9 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
     ``reset(options={"scenario": s})`` pins a scenario for that episode: a Scenario, its dict,
     ``"random"``, or a name of :func:`~soaring_env.scenario.get_scenario` (``"paper"``,
     ``"random-<seed>"``, a path to a scenario ``.json`` file) -- the same forms as ``scenario=``.
+    Random scenarios follow distribution v2 (:mod:`soaring_env.env.scenario_batch`: the ranges of
+    :func:`~soaring_env.scenario.make_scenario`, drawn as the batched vector env draws them, so
+    ``gym.make_vec(..., num_envs=n)`` equals n single envs); ``"random-<seed>"`` names stay v1.
 
     ## Episode End
 
@@ -266,6 +271,8 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         self._dist = np.zeros(1)
         self._ctrl = np.zeros((1, 4))
         self._x0 = np.zeros((1, 4))
+        # "random" draws (distribution v2) from env.np_random; set up at the first draw
+        self._sampler: ScenarioSampler | None = None
         self._noise = np.zeros((1, 2))
         self._noise_key = np.zeros(1, dtype=np.uint64)
         self._history = np.zeros((1, self._hist_len, len(HISTORY_FEATURES)))
@@ -383,6 +390,26 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         self._nth = np.array([len(sc.field.thermals)], dtype=np.int64)
         self._allowed = self.model.allowed_primitives()
 
+    def _draw_random(self) -> Scenario:
+        """A new random scenario from ``self.np_random``: ``draw_scenario_arrays(np_random, 1)``, the
+        draw env ``i`` of a vector env makes from its generator (goal reaching, distribution v2); the
+        task's generator where the batched draw does not apply (:func:`batched_draws`)."""
+        cfg = self.config
+        if not batched_draws(cfg.generator, cfg.random_scenario):
+            return cfg.generator(self.np_random, **dict(cfg.random_scenario))
+        sampler = self._sampler
+        if sampler is None:
+            sampler = self._sampler = ScenarioSampler(self.config.random_scenario)
+            self._drawn = (
+                np.empty((1, N_PARAMS)),
+                np.zeros((1, max(1, sampler.max_thermals), PACKED_COLUMNS)),
+                np.zeros(1, dtype=np.int64),
+                np.empty((1, 4)),
+            )
+        prm, th, nth, start = self._drawn
+        sampler.draw_from(_ZERO_ROW, self.np_random, prm, th, nth, start)
+        return scenario_from_row(sampler.spec, prm[0], th[0, : nth[0]], start[0])
+
     def _start_episode(self) -> tuple[np.ndarray, dict[str, Any]]:
         sc = self.scenario
         self.state = sc.start_state
@@ -450,7 +477,9 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         """Start an episode; ``options={"scenario": Scenario | name | dict | "random"}`` pins a scenario."""
         super().reset(seed=seed)
         cfg = self.config
-        sc = choose_scenario(options, self._fixed_scenario, cfg.random_scenario, lambda: self.np_random, cfg.generator)
+        sc = choose_scenario(options, self._fixed_scenario, cfg.random_scenario, cfg.generator)
+        if sc is None:
+            sc = self._draw_random()
         if sc is not self.scenario:
             self._install(sc)
         obs, info = self._start_episode()

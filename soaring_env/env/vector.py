@@ -6,6 +6,12 @@ gymnasium's generic vector envs over :class:`~soaring_env.env.core.SoaringEnv`. 
 transitions for the same seeds: every env ``i`` behaves like a single env reset with ``seed + i``
 (each has its own ``np.random.Generator``, used only by ``"random"`` scenarios).
 
+``"random"`` scenarios (distribution v2, :mod:`soaring_env.env.scenario_batch`) are drawn for all
+envs that reset at once, by one compiled call that writes the kernels' rows directly; env ``i`` still
+reads only its own generator's stream, so it draws what a single env seeded ``seed + i`` draws.
+The :class:`~soaring_env.scenario.Scenario` objects (``scenarios``) and models (``models``) of
+drawn rows are built only when asked for; ``info["scenario"]`` holds the names.
+
 Autoreset: ``AutoresetMode.NEXT_STEP`` by default, as gymnasium's ``SyncVectorEnv`` (the step
 after an episode ends resets that env, ignores its action and returns reward 0,
 terminated = truncated = False and the reset info); ``autoreset_mode=AutoresetMode.SAME_STEP``
@@ -19,7 +25,6 @@ reads a per-env table of fields), so ``"random"`` scenarios cost no more than a 
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Sequence
 from typing import Any, ClassVar
 
@@ -40,6 +45,13 @@ from soaring_env.env._kernels import (
 from soaring_env.env.config import SoaringEnvConfig, choose_scenario
 from soaring_env.env.core import SoaringBaseEnv, SoaringContinuousEnv, SoaringEnv
 from soaring_env.env.observation import N_PARAMS, P_WN, observe_batch, scenario_params, sensor_noise
+from soaring_env.env.scenario_batch import (
+    ScenarioSampler,
+    batched_draws,
+    generator_list,
+    scenario_from_row,
+    set_generator,
+)
 from soaring_env.model import BATTERY_EMPTY, OUTCOMES, SoaringModel
 from soaring_env.physics.thermals import PACKED_COLUMNS
 from soaring_env.primitives import N_PRIMITIVES
@@ -48,6 +60,16 @@ from soaring_env.scenario import Scenario
 _OUTCOMES_OBJ = np.array(OUTCOMES, dtype=object)
 #: info keys of a step that a reset info does not have
 _STEP_ONLY = ("edge_cost", "fuel", "potential", "kinetic", "airspeed", "bank_angle", "battery_left", "reward_terms")
+#: dtypes of the reset info's arrays (as SyncVectorEnv batches them)
+_RESET_DTYPES: dict[str, Any] = {
+    "energy_spent": np.float64,
+    "height": np.float64,
+    "updraft": np.float64,
+    "time": np.float64,
+    "outcome": object,
+    "is_success": np.bool_,
+    "scenario": object,
+}
 
 
 class _SoaringVectorBase(VectorEnv):
@@ -65,7 +87,7 @@ class _SoaringVectorBase(VectorEnv):
     :param overrides: single config fields, as for ``gym.make``.
 
     Attributes: ``states`` (B, 4), ``times`` (B,) [s], ``airspeed_prev`` (B,) [m/s],
-    ``energy_spent`` (B,) [J/kg], ``scenarios`` and ``models`` (lists of B).
+    ``energy_spent`` (B,) [J/kg], ``scenarios`` and ``models`` (lists of B, built on access).
     """
 
     metadata: dict[str, Any] = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}  # noqa: RUF012
@@ -135,15 +157,31 @@ class _SoaringVectorBase(VectorEnv):
         self._prm = np.zeros((b, N_PARAMS))
         self._th = np.zeros((b, 1, PACKED_COLUMNS))
         self._nth = np.zeros(b, dtype=np.int64)
-        #: per-env field scalars for the kernel (rows of field_params); env i's field is row i
-        self._fpar = np.zeros((b, N_PARAMS - P_WN))
+        #: per-env field scalars for the kernel (rows of field_params); env i's field is row i. A view
+        #: of the field_params tail of the scenario_params rows: no copy to keep in step at resets.
+        self._fpar = self._prm[:, P_WN:]
+        assert self._fpar.shape == (b, N_PARAMS - P_WN)
         self._env_index = np.arange(b, dtype=np.int64)
         self._seeds: list[int | None] = [None] * b
         self._rngs: list[np.random.Generator | None] = [None] * b
-        self.scenarios: list[Scenario] = [tmpl.scenario] * b
-        self.models: list[SoaringModel] = [tmpl.model] * b
+        self._start = np.empty((b, 4))
+        #: per env: its Scenario -- stale where ``_lazy``: a drawn row whose Scenario is not built yet
+        self._sc = np.full(b, None, dtype=object)
+        self._sc[:] = [tmpl.scenario] * b
+        self._lazy = np.zeros(b, dtype=np.bool_)
+        self._names = np.full(b, tmpl.scenario.name, dtype=object)
         #: model per scenario in use, by id(scenario); the model keeps the scenario alive
         self._models: dict[int, SoaringModel] = {id(tmpl.scenario): tmpl.model}
+        self._sampler: ScenarioSampler | None = None
+        #: env i's generator at entry i (a numba typed List, built at the first random draw)
+        self._gens: Any = None
+        fixed = tmpl._fixed_scenario
+        #: the configured scenario's packed rows, computed once
+        self._fixed_prm = scenario_params(fixed) if fixed is not None else None
+        #: "random" draws in batches (goal reaching, distribution v2), else by the task's generator
+        self._batched = batched_draws(tmpl.config.generator, tmpl.config.random_scenario)
+        if fixed is None and self._batched:
+            self._ensure_slots(self._random_sampler().max_thermals)
         self._allowed = tmpl.model.allowed_primitives()
         self._envelope = tmpl.model.control_envelope
         self._needs_reset = True
@@ -162,6 +200,18 @@ class _SoaringVectorBase(VectorEnv):
             self._rngs[i] = rng
         return rng
 
+    def _random_sampler(self) -> ScenarioSampler:
+        if self._sampler is None:
+            self._sampler = ScenarioSampler(self.config.random_scenario)
+        return self._sampler
+
+    def _ensure_slots(self, n: int) -> None:
+        """Grow the per-env thermal table to at least ``n`` slots."""
+        if n > self._th.shape[1]:
+            th = np.zeros((self.num_envs, n, PACKED_COLUMNS))
+            th[:, : self._th.shape[1]] = self._th
+            self._th = th
+
     def _model(self, sc: Scenario) -> SoaringModel:
         model = self._models.get(id(sc))
         if model is None or model.scenario is not sc:
@@ -177,53 +227,76 @@ class _SoaringVectorBase(VectorEnv):
             self._models[id(sc)] = model
         return model
 
+    @property
+    def scenarios(self) -> list[Scenario]:
+        """The current :class:`Scenario` of every env; drawn ones are built here, on first access
+        after their reset (equal to what a single env would hold, and packing back bit for bit)."""
+        lazy = np.flatnonzero(self._lazy)
+        if lazy.size:
+            spec = self._random_sampler().spec
+            for i in lazy.tolist():
+                self._sc[i] = scenario_from_row(spec, self._prm[i], self._th[i, : self._nth[i]], self._start[i])
+            self._lazy[lazy] = False
+        return self._sc.tolist()
+
+    @property
+    def models(self) -> list[SoaringModel]:
+        """The :class:`SoaringModel` of every env's current scenario (built on access)."""
+        scs = self.scenarios
+        if len(self._models) > 4 * self.num_envs:  # forget models of scenarios no env uses
+            live = {id(sc) for sc in scs}
+            self._models = {k: v for k, v in self._models.items() if k in live}
+        return [self._model(sc) for sc in scs]
+
+    def _put(self, rows: np.ndarray, sc: Scenario, prm: np.ndarray | None = None) -> None:
+        """Give envs ``rows`` the scenario ``sc`` (``prm``: its scenario_params row, if known)."""
+        n = len(sc.field.thermals)
+        self._ensure_slots(n)
+        self._prm[rows] = scenario_params(sc) if prm is None else prm
+        self._th[rows, :n] = sc.field.packed
+        self._nth[rows] = n
+        self._start[rows] = sc.start
+        self._sc[rows] = sc
+        self._lazy[rows] = False
+        self._names[rows] = sc.name
+
+    def _draw(self, rows: np.ndarray) -> None:
+        """Draw new random scenarios for envs ``rows``, each from its own generator, in one call."""
+        sampler = self._random_sampler()
+        self._ensure_slots(sampler.max_thermals)
+        if self._gens is None:
+            self._gens = generator_list([self._rng(i) for i in range(self.num_envs)])
+        sampler.draw_each(rows, self._gens, self._prm, self._th, self._nth, self._start)
+        self._lazy[rows] = True  # their Scenario objects (in _sc) are stale until ``scenarios`` rebuilds them
+        self._names[rows] = sampler.spec.name
+
     def _reset_rows(self, rows: np.ndarray, options: dict[str, Any] | None, obs: np.ndarray) -> None:
         """Start new episodes in envs ``rows`` and write their observations into ``obs``."""
         t = self.template
         fixed = t._fixed_scenario
-        row_list = rows.tolist()
         if options is None and fixed is not None:
-            chosen = [fixed]
-            groups: list[tuple[Scenario, np.ndarray]] = [(fixed, rows)]
-            if any(self.scenarios[i] is not fixed for i in row_list):
-                self._model(fixed)
-                for i in row_list:
-                    self.scenarios[i] = fixed
-                    self.models[i] = self._models[id(fixed)]
+            self._put(rows, fixed, self._fixed_prm)
         else:
             cfg = t.config
-            chosen = [
-                choose_scenario(options, fixed, cfg.random_scenario, functools.partial(self._rng, i), cfg.generator)
-                for i in row_list
-            ]
-            by_sc: dict[int, list[int]] = {}
-            for i, sc in zip(row_list, chosen, strict=True):
-                if self.scenarios[i] is not sc:
-                    self.scenarios[i] = sc
-                    self.models[i] = self._model(sc)
-                by_sc.setdefault(id(sc), []).append(i)
-            groups = [(self.scenarios[v[0]], np.array(v)) for v in by_sc.values()]
-        need = max(len(sc.field.thermals) for sc in chosen)
-        if need > self._th.shape[1]:
-            th = np.zeros((self.num_envs, need, PACKED_COLUMNS))
-            th[:, : self._th.shape[1]] = self._th
-            self._th = th
-        for sc, idx in groups:
-            n = len(sc.field.thermals)
-            self._prm[idx] = scenario_params(sc)
-            self._fpar[idx] = self._prm[idx, P_WN:]  # the field_params tail of scenario_params
-            self._th[idx, :n] = sc.field.packed
-            self._nth[idx] = n
-            self.states[idx] = sc.start_state
-            self.battery[idx] = t.battery_budget(sc)
+            sc = choose_scenario(options, fixed, cfg.random_scenario, cfg.generator)  # the same for every row
+            if sc is None and self._batched:
+                self._draw(rows)
+            elif sc is None:  # a task's generator: one Scenario per row, from the row's generator
+                for i in rows.tolist():
+                    self._put(np.array([i]), cfg.generator(self._rng(i), **dict(cfg.random_scenario)))
+            else:
+                self._put(rows, sc)
+        if t.has_battery:  # task envs: every row's Scenario is built (no batched draws)
+            self.battery[rows] = [t.battery_budget(self._sc[i]) for i in rows.tolist()]
         self.battery_left[rows] = self.battery[rows]
         self._history[rows] = 0.0
         if t._noise_sigma:  # after the scenario draws, as the single env draws its key
-            for i in row_list:
+            for i in rows.tolist():
                 self._noise_key[i] = self._rng(i).integers(0, 2**63, dtype=np.uint64)
             self._noise[rows] = sensor_noise(
                 self._noise_key[rows], np.zeros(len(rows), dtype=np.uint64), t._noise_sigma
             )
+        self.states[rows] = self._start[rows]
         self.times[rows] = 0.0
         self.airspeed_prev[rows] = np.nan
         self.energy_spent[rows] = 0.0
@@ -252,32 +325,31 @@ class _SoaringVectorBase(VectorEnv):
         if t._extras or t._hist_len:
             t._fill_task_entries(obs, rows, self.times, self.battery_left, self.battery, self._history)
         self._d_goal[rows] = self._dist[rows]
-        if len(self._models) > 4 * self.num_envs:  # forget models of scenarios no env uses
-            live = {id(sc) for sc in self.scenarios}
-            self._models = {k: v for k, v in self._models.items() if k in live}
 
     def _reset_info(self, rows: np.ndarray, infos: dict[str, Any]) -> None:
-        """Write the reset info of envs ``rows`` into batched ``infos`` (masks like SyncVectorEnv)."""
+        """Write the reset info of envs ``rows`` into batched ``infos`` (masks like SyncVectorEnv).
+
+        ``infos`` is empty (``reset``) or a step's infos, whose keys all have all-True masks.
+        """
         b = self.num_envs
-        vals = {
-            "energy_spent": np.zeros(b),
-            "height": self.states[:, 3].copy(),
-            "updraft": self._upd.copy(),
-            "time": np.zeros(b),
-            "outcome": np.full(b, "flying", dtype=object),
-            "is_success": np.zeros(b, dtype=np.bool_),
-            "scenario": np.array([sc.name for sc in self.scenarios], dtype=object),
-        }
-        for key, v in vals.items():
-            if key in infos:
-                infos[key][rows] = v[rows]
-                infos["_" + key][rows] = True
-            else:
-                arr = np.zeros(b, dtype=v.dtype) if v.dtype != object else np.full(b, None, dtype=object)
-                arr[rows] = v[rows]
-                mask = np.zeros(b, dtype=np.bool_)
+        vals = (
+            ("energy_spent", 0.0),
+            ("height", self.states[rows, 3]),
+            ("updraft", self._upd[rows]),
+            ("time", 0.0),
+            ("outcome", "flying"),
+            ("is_success", False),
+            ("scenario", self._names[rows]),
+        )
+        for key, v in vals:
+            arr = infos.get(key)
+            if arr is None:
+                dtype = _RESET_DTYPES[key]
+                arr = np.empty(b, dtype=object) if dtype is object else np.zeros(b, dtype=dtype)  # None / 0
+                infos[key] = arr
+                infos["_" + key] = mask = np.zeros(b, dtype=np.bool_)
                 mask[rows] = True
-                infos[key], infos["_" + key] = arr, mask
+            arr[rows] = v  # a key step() already filled has its mask all True
         for key in _STEP_ONLY:
             if key in infos:
                 infos["_" + key][rows] = False
@@ -314,10 +386,13 @@ class _SoaringVectorBase(VectorEnv):
             if mask.shape != (b,) or mask.dtype != np.bool_ or not mask.any():
                 raise ConfigError(f"options['reset_mask'] must be a bool array of shape ({b},) with a True entry")
             rows = np.flatnonzero(mask)
-        for i in rows.tolist():
-            if seeds[i] is not None:
-                self._seeds[i] = seeds[i]
-                self._rngs[i] = None
+        reseeded = [i for i in rows.tolist() if seeds[i] is not None]
+        for i in reseeded:
+            self._seeds[i] = seeds[i]
+            self._rngs[i] = None
+        if self._gens is not None:
+            for i in reseeded:  # the random draws read the new generators
+                set_generator(self._gens, i, self._rng(i))
         obs = np.empty((b, self._n_obs), dtype=np.float32)
         if mask is not None:
             obs[:] = self._obs_last
@@ -399,9 +474,10 @@ class _SoaringVectorBase(VectorEnv):
             self._dist,
             obs,
         )
-        cost = terms[:, 3].copy()
-        self.battery_left = self.battery_left - (terms[:, 0] + terms[:, 2])
-        codes[(codes == FLYING) & (self.battery_left <= 0.0)] = BATTERY_EMPTY
+        tt = terms.T.copy()  # (6, B): one copy gives every per-term info array below
+        if t.has_battery:
+            self.battery_left = self.battery_left - (tt[0] + tt[2])
+            codes[(codes == FLYING) & (self.battery_left <= 0.0)] = BATTERY_EMPTY
         if t._extras or t._hist_len:
             flown = (ks + 1) * t._dt
             lift = self._lift + self._noise[:, 1]
@@ -409,6 +485,7 @@ class _SoaringVectorBase(VectorEnv):
                 self._history, lift, new_states[:, 3] - self.states[:, 3], new_states[:, 2] - self.states[:, 2], flown
             )
             t._fill_task_entries(obs, self._env_index, t_new, self.battery_left, self.battery, self._history)
+        cost = tt[3]
         airspeed = ctrl[:, 0].copy()
         d_new = self._dist.copy()
         reward_terms = t.reward_terms(cost, self._d_goal, d_new, codes)
@@ -426,16 +503,15 @@ class _SoaringVectorBase(VectorEnv):
             truncated = self.steps >= self.max_episode_steps
         if t._time_limit != np.inf:
             truncated |= ~terminated & (t_new >= t._time_limit - 1e-9)
-        ones = np.ones(b, dtype=np.bool_)
         infos: dict[str, Any] = {
             "energy_spent": self.energy_spent.copy(),
             "edge_cost": cost,
-            "fuel": terms[:, 0].copy(),
-            "potential": terms[:, 1].copy(),
-            "kinetic": terms[:, 2].copy(),
+            "fuel": tt[0],
+            "potential": tt[1],
+            "kinetic": tt[2],
             "height": new_states[:, 3].copy(),
             "airspeed": airspeed,
-            "bank_angle": terms[:, 4].copy(),
+            "bank_angle": tt[4],
             "updraft": self._upd.copy(),
             "time": t_new.copy(),
             "outcome": _OUTCOMES_OBJ[codes],
@@ -444,10 +520,12 @@ class _SoaringVectorBase(VectorEnv):
         }
         if t.has_battery:
             infos["battery_left"] = self.battery_left.copy()
-        for key in list(infos):
-            infos["_" + key] = ones.copy()
-        for key in list(infos["reward_terms"]):
-            infos["reward_terms"]["_" + key] = ones.copy()
+        keys, sub = list(infos), list(reward_terms)
+        masks = np.ones((len(keys) + len(sub), b), dtype=np.bool_)  # a row per mask, one allocation
+        for j, key in enumerate(keys):
+            infos["_" + key] = masks[j]
+        for j, key in enumerate(sub, len(keys)):
+            reward_terms["_" + key] = masks[j]
         if autoreset is not None:
             if autoreset.any():
                 rows = np.flatnonzero(autoreset)

@@ -1,0 +1,396 @@
+"""Random scenarios in batches: many draws at once, straight into the env kernels' packed arrays.
+
+The envs' ``"random"`` mode draws a new scenario at every reset. Building a
+:class:`~soaring_env.scenario.Scenario` (frozen, validated dataclasses) and a model per reset costs
+~100 us; here a draw is a row of uniforms from numpy turned by one compiled kernel into the rows the
+env kernels read -- a :func:`~soaring_env.env.observation.scenario_params` row, a thermal table of
+:attr:`WindField.packed <soaring_env.physics.thermals.WindField.packed>` rows, the thermal count and
+the start state -- for every drawn env at once. A :class:`Scenario` is built from those rows only when
+someone asks for it (:func:`scenario_from_row`), and it packs back into the same rows bit for bit.
+
+Distribution versions (:data:`RANDOM_SCENARIO_VERSION`):
+
+* v1 -- :func:`~soaring_env.scenario.make_scenario`, one scenario at a time; still what
+  ``"random-<seed>"`` names (the held-out set ``random-10000``, ..., PPO's validation seeds 5000+)
+  draw, bit for bit.
+* v2 -- this module, the ``"random"`` mode of every env since this version. The same keywords,
+  ranges and validation (:class:`~soaring_env.scenario.RandomScenarioSpec`), the same uniform
+  distributions and the same rejection of draws near the domain's edges, so the same distribution
+  of scenarios; but the generator's stream is used differently (each draw reads a fixed block of
+  :func:`draw_width` uniforms), so a seed gives other scenarios than under v1.
+
+Streams: a draw reads its uniforms straight from a numpy generator inside the kernel (exactly the
+numbers ``rng.random()`` would return, advancing that generator): each try reads
+:func:`draw_width` uniforms, and a try whose start or goal lies near the domain's edges is followed
+by another. :func:`draw_scenario_arrays` draws ``n`` scenarios one after the other from one
+generator; the envs draw env ``i``'s scenario from env ``i``'s own generator (``env.np_random`` of a
+single env, ``seed + i`` in a vector env), for all resetting envs in one call, so a vector env of B
+envs gives exactly the scenarios of B single envs seeded alike, whichever envs reset together.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numba import njit
+from numba.typed import List
+
+from soaring_env import _jit  # noqa: F401  (the package-wide kernel cache key, before any kernel)
+from soaring_env._validation import ConfigError, check_int, check_type
+from soaring_env.env.observation import (
+    N_PARAMS,
+    P_DVX,
+    P_DVY,
+    P_GE,
+    P_GH,
+    P_GN,
+    P_GR,
+    P_WE,
+    P_WN,
+    scenario_params,
+)
+from soaring_env.physics.thermals import COL_PEAK, COL_STRENGTH, PACKED_COLUMNS, Thermal, WindField
+from soaring_env.scenario import (
+    NO_FIT,
+    RANDOM_MARGIN,
+    RANDOM_TRIES,
+    TIME_OPTIONS,
+    GoalRegion,
+    RandomScenarioSpec,
+    Scenario,
+    make_scenario,
+)
+
+#: The distribution of the envs' ``"random"`` mode: 2 = this module's batched draw (v1 =
+#: :func:`~soaring_env.scenario.make_scenario` per scenario, kept for ``"random-<seed>"`` names).
+RANDOM_SCENARIO_VERSION = 2
+
+#: Uniforms of one draw before its thermals: goal distance, goal bearing, start offset north and
+#: east, start height, goal height, start heading, thermal count, wind speed, wind direction.
+_HEAD = 10
+#: Uniforms per thermal slot: position along and across the start-goal line, strength.
+_PER_THERMAL = 3
+
+# Columns of the kernel's range row (see _range_row).
+_R_GD, _R_H, _R_S, _R_WS, _R_NMIN, _R_NMAX, _R_EMIN, _R_EMAX, _R_HMAX, _R_MARGIN = 0, 2, 4, 6, 8, 9, 10, 11, 12, 13
+_N_RANGE = 14
+
+
+def batched_draws(generator: Any, kwargs: Mapping[str, Any]) -> bool:
+    """Whether an env's ``"random"`` mode draws in batches here: goal reaching
+    (:func:`~soaring_env.scenario.make_scenario`) with steady thermals. A task's generator, or the
+    thermal life-cycle and fluctuation options, draw one :class:`Scenario` at a time instead."""
+    return generator is make_scenario and not (set(kwargs) & set(TIME_OPTIONS))
+
+
+def draw_width(spec: RandomScenarioSpec) -> int:
+    """Uniforms one draw reads: 10 for start, goal and wind, 3 per possible thermal."""
+    return _HEAD + _PER_THERMAL * spec.n_thermals[1]
+
+
+def random_spec(kwargs: RandomScenarioSpec | Mapping[str, Any] | None = None) -> RandomScenarioSpec:
+    """``kwargs`` (the keywords of :func:`~soaring_env.scenario.make_scenario`) as a validated spec."""
+    if isinstance(kwargs, RandomScenarioSpec):
+        return kwargs
+    return RandomScenarioSpec(**dict(kwargs or {}))
+
+
+@functools.lru_cache(maxsize=64)
+def _templates(spec: RandomScenarioSpec) -> tuple[np.ndarray, np.ndarray]:
+    """The columns every draw of ``spec`` shares: a full :func:`scenario_params` row (goal radius,
+    domain, zi, model; the kernel overwrites goal centre and wind) and a full packed thermal row
+    (radius-or-influence from the default ``Thermal.radius``; the kernel overwrites centre and
+    strength). Taken from real objects, so the layouts stay those of ``scenario_params`` and
+    ``WindField.packed``."""
+    one = make_scenario(np.random.default_rng(0), **{**_as_kwargs(spec), "n_thermals": (0, 0)})
+    prm = scenario_params(one)
+    th = WindField(thermals=(Thermal(north=0.0, east=0.0),), model=spec.model, zi=spec.zi).packed[0].copy()
+    prm.setflags(write=False)
+    th.setflags(write=False)
+    return prm, th
+
+
+def _as_kwargs(spec: RandomScenarioSpec) -> dict[str, Any]:
+    return {f: getattr(spec, f) for f in spec.__dataclass_fields__}
+
+
+@functools.lru_cache(maxsize=64)
+def _range_row(spec: RandomScenarioSpec) -> np.ndarray:
+    b = spec.domain
+    row = np.empty(_N_RANGE)
+    row[_R_GD : _R_GD + 2] = spec.goal_distance
+    row[_R_H : _R_H + 2] = spec.height
+    row[_R_S : _R_S + 2] = spec.strength
+    row[_R_WS : _R_WS + 2] = spec.wind_speed
+    row[_R_NMIN], row[_R_NMAX], row[_R_EMIN], row[_R_EMAX] = b.north_min, b.north_max, b.east_min, b.east_max
+    row[_R_HMAX] = b.height_max
+    row[_R_MARGIN] = RANDOM_MARGIN
+    row.setflags(write=False)
+    return row
+
+
+@njit(cache=True, inline="always")
+def _draw_row(
+    g: Any,
+    i: int,
+    x: np.ndarray,
+    r: np.ndarray,
+    n_lo: int,
+    n_hi: int,
+    drift: bool,
+    max_tries: int,
+    prm_t: np.ndarray,
+    th_t: np.ndarray,
+    prm: np.ndarray,
+    th: np.ndarray,
+    nth: np.ndarray,
+    start: np.ndarray,
+) -> bool:
+    """Draw one scenario from generator ``g`` into row ``i`` of ``prm``, ``th``, ``nth``, ``start``.
+
+    Each try reads ``x.size`` uniforms of ``g``; the uniform ranges and the rejection rule (start and
+    goal inside the domain and ``margin`` away from its horizontal edges) are those of
+    ``make_scenario``. False if ``max_tries`` tries all failed.
+    """
+    nmin, nmax, emin, emax, hmax, margin = r[_R_NMIN], r[_R_NMAX], r[_R_EMIN], r[_R_EMAX], r[_R_HMAX], r[_R_MARGIN]
+    cn = 0.5 * (nmin + nmax)
+    ce = 0.5 * (emin + emax)
+    span_n = nmax - nmin
+    span_e = emax - emin
+    pi = math.pi
+    for _ in range(max_tries):
+        for c in range(x.size):
+            x[c] = g.random()
+        dist = r[_R_GD] + (r[_R_GD + 1] - r[_R_GD]) * x[0]
+        bearing = -pi + 2.0 * pi * x[1]
+        cb = math.cos(bearing)
+        sb = math.sin(bearing)
+        sn = cn - 0.5 * dist * cb + (-0.1 + 0.2 * x[2]) * span_n
+        se = ce - 0.5 * dist * sb + (-0.1 + 0.2 * x[3]) * span_e
+        gn = sn + dist * cb
+        ge = se + dist * sb
+        sh = r[_R_H] + (r[_R_H + 1] - r[_R_H]) * x[4]
+        gh = r[_R_H] + (r[_R_H + 1] - r[_R_H]) * x[5]
+        inside = (sn >= nmin and sn <= nmax and se >= emin and se <= emax and sh > 0.0 and sh <= hmax) and (
+            gn >= nmin and gn <= nmax and ge >= emin and ge <= emax and gh > 0.0 and gh <= hmax
+        )
+        edge = min(sn - nmin, nmax - sn, se - emin, emax - se, gn - nmin, nmax - gn, ge - emin, emax - ge)
+        if not inside or edge < margin:
+            continue
+        chi = bearing + (-0.5 * pi + pi * x[6])
+        chi = (chi + pi) % (2.0 * pi) - pi
+        k = n_lo + min(int(x[7] * (n_hi - n_lo + 1)), n_hi - n_lo)
+        ws = r[_R_WS] + (r[_R_WS + 1] - r[_R_WS]) * x[8]
+        wd = -pi + 2.0 * pi * x[9]
+        wn = ws * math.cos(wd)
+        we = ws * math.sin(wd)
+        for j in range(k):
+            along = 0.2 + 0.6 * x[_HEAD + _PER_THERMAL * j]
+            across = (-0.3 + 0.6 * x[_HEAD + _PER_THERMAL * j + 1]) * dist
+            th[i, j, :] = th_t
+            th[i, j, 0] = sn + along * (gn - sn) - across * sb
+            th[i, j, 1] = se + along * (ge - se) + across * cb
+            w = r[_R_S] + (r[_R_S + 1] - r[_R_S]) * x[_HEAD + _PER_THERMAL * j + 2]
+            th[i, j, COL_STRENGTH] = w
+            th[i, j, COL_PEAK] = w  # a steady thermal's peak strength is its strength
+        nth[i] = k
+        prm[i, :] = prm_t
+        prm[i, P_GN] = gn
+        prm[i, P_GE] = ge
+        prm[i, P_GH] = gh
+        prm[i, P_WN] = wn
+        prm[i, P_WE] = we
+        prm[i, P_DVX] = wn if drift else 0.0
+        prm[i, P_DVY] = we if drift else 0.0
+        start[i, 0] = sn
+        start[i, 1] = se
+        start[i, 2] = chi
+        start[i, 3] = sh
+        return True
+    return False
+
+
+@njit(cache=True)
+def _draw_each(rows, gens, r, n_lo, n_hi, drift, max_tries, prm_t, th_t, prm, th, nth, start) -> int:
+    """Row ``i`` of ``rows`` from generator ``gens[i]`` (a typed List); -1, or the row that failed."""
+    x = np.empty(_HEAD + _PER_THERMAL * n_hi)
+    for i in rows:
+        if not _draw_row(gens[i], i, x, r, n_lo, n_hi, drift, max_tries, prm_t, th_t, prm, th, nth, start):
+            return i
+    return -1
+
+
+@njit(cache=True)
+def _draw_from(rows, g, r, n_lo, n_hi, drift, max_tries, prm_t, th_t, prm, th, nth, start) -> int:
+    """Every row of ``rows``, in order, from the one generator ``g``; -1, or the row that failed."""
+    x = np.empty(_HEAD + _PER_THERMAL * n_hi)
+    for i in rows:
+        if not _draw_row(g, i, x, r, n_lo, n_hi, drift, max_tries, prm_t, th_t, prm, th, nth, start):
+            return i
+    return -1
+
+
+@njit(cache=True)
+def _generator_list(g: Any, n: int) -> Any:
+    out = List()
+    for _ in range(n):
+        out.append(g)
+    return out
+
+
+@njit(cache=True)
+def _set_generator(gens: Any, i: int, g: Any) -> None:
+    gens[i] = g
+
+
+def generator_list(gens: Sequence[np.random.Generator]) -> Any:
+    """``gens`` as the numba typed List :meth:`ScenarioSampler.draw_each` reads (built by compiled,
+    disk-cached helpers: a typed List filled from Python compiles its methods in every process)."""
+    out = _generator_list(gens[0], len(gens))
+    for i in range(1, len(gens)):
+        _set_generator(out, i, gens[i])
+    return out
+
+
+def set_generator(gens: Any, i: int, g: np.random.Generator) -> None:
+    """Replace entry ``i`` of a :func:`generator_list` (the env's generator was reseeded)."""
+    _set_generator(gens, i, g)
+
+
+class ScenarioSampler:
+    """v2 random scenarios of one set of keywords, drawn into packed rows.
+
+    :param spec: the keywords (a :class:`~soaring_env.scenario.RandomScenarioSpec` or a dict of
+        :func:`~soaring_env.scenario.make_scenario` keywords); validated like ``make_scenario``'s.
+
+    The ``draw_*`` methods write, for each drawn row ``i``: ``params[i]`` (N_PARAMS,) a
+    :func:`~soaring_env.env.observation.scenario_params` row, ``thermals[i, :k]`` its k
+    ``WindField.packed`` rows (``thermals`` needs :attr:`max_thermals` slots; slots beyond k are
+    left alone), ``n_thermals[i] = k`` and ``start[i]`` (Pn [m], Pe [m], chi [rad], h [m]).
+    """
+
+    def __init__(self, spec: RandomScenarioSpec | Mapping[str, Any] | None = None) -> None:
+        self.spec = random_spec(spec)
+        self._args = (
+            _range_row(self.spec),
+            self.spec.n_thermals[0],
+            self.spec.n_thermals[1],
+            self.spec.drift,
+            RANDOM_TRIES,
+            *_templates(self.spec),
+        )
+
+    @property
+    def max_thermals(self) -> int:
+        """Most thermals a draw can have (the width a thermal table needs)."""
+        return self.spec.n_thermals[1]
+
+    def draw_each(
+        self,
+        rows: np.ndarray,
+        gens: Any,
+        params: np.ndarray,
+        thermals: np.ndarray,
+        n_thermals: np.ndarray,
+        start: np.ndarray,
+    ) -> None:
+        """Draw row ``i`` of ``rows`` (int64) from ``gens[i]`` (a :func:`generator_list`), all in one call."""
+        if thermals.shape[1] < self.max_thermals:
+            raise ConfigError(f"thermal table has {thermals.shape[1]} slots; draws need {self.max_thermals}")
+        failed = _draw_each(rows, gens, *self._args, params, thermals, n_thermals, start)
+        if failed >= 0:
+            raise ConfigError(NO_FIT)
+
+    def draw_from(
+        self,
+        rows: np.ndarray,
+        rng: np.random.Generator,
+        params: np.ndarray,
+        thermals: np.ndarray,
+        n_thermals: np.ndarray,
+        start: np.ndarray,
+    ) -> None:
+        """Draw the rows ``rows`` (int64) in order, all from ``rng``."""
+        check_type("rng", rng, np.random.Generator)
+        if thermals.shape[1] < self.max_thermals:
+            raise ConfigError(f"thermal table has {thermals.shape[1]} slots; draws need {self.max_thermals}")
+        failed = _draw_from(rows, rng, *self._args, params, thermals, n_thermals, start)
+        if failed >= 0:
+            raise ConfigError(NO_FIT)
+
+    def draw(self, rng: np.random.Generator, n: int) -> ScenarioBatch:
+        """``n`` scenarios drawn one after the other from ``rng``, as a :class:`ScenarioBatch`."""
+        n = check_int("n", n, 1)
+        params = np.empty((n, N_PARAMS))
+        thermals = np.zeros((n, max(1, self.max_thermals), PACKED_COLUMNS))
+        counts = np.zeros(n, dtype=np.int64)
+        start = np.empty((n, 4))
+        self.draw_from(np.arange(n, dtype=np.int64), rng, params, thermals, counts, start)
+        return ScenarioBatch(spec=self.spec, params=params, thermals=thermals, n_thermals=counts, start=start)
+
+
+def scenario_from_row(
+    spec: RandomScenarioSpec, params: np.ndarray, thermals: np.ndarray, start: np.ndarray
+) -> Scenario:
+    """The :class:`Scenario` of one drawn row: ``params`` (N_PARAMS,), ``thermals`` (k, columns)
+    its k packed thermal rows, ``start`` (4,). ``scenario_params`` and ``field.packed`` of the
+    result give those rows back bit for bit."""
+    field = WindField(
+        thermals=tuple(Thermal(north=float(r[0]), east=float(r[1]), strength=float(r[2])) for r in thermals),
+        model=spec.model,
+        zi=spec.zi,
+        wind_north=float(params[P_WN]),
+        wind_east=float(params[P_WE]),
+        drift=spec.drift,
+    )
+    goal = GoalRegion(
+        north=float(params[P_GN]), east=float(params[P_GE]), height=float(params[P_GH]), radius=float(params[P_GR])
+    )
+    st = start.tolist()
+    return Scenario(field=field, start=(st[0], st[1], st[2], st[3]), goal=goal, bounds=spec.domain, name=spec.name)
+
+
+@dataclass(frozen=True)
+class ScenarioBatch:
+    """``n`` drawn scenarios as packed arrays (what the env kernels read).
+
+    :param spec: the draw keywords.
+    :param params: (n, N_PARAMS) float64 :func:`~soaring_env.env.observation.scenario_params` rows.
+    :param thermals: (n, max(1, n_thermals high), PACKED_COLUMNS) float64 ``WindField.packed`` rows,
+        zero beyond each row's count.
+    :param n_thermals: (n,) int64 thermal counts.
+    :param start: (n, 4) float64 start states (Pn [m], Pe [m], chi [rad], h [m]).
+    """
+
+    spec: RandomScenarioSpec
+    params: np.ndarray
+    thermals: np.ndarray
+    n_thermals: np.ndarray
+    start: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.params.shape[0])
+
+    def scenario(self, i: int) -> Scenario:
+        """Row ``i`` as a :class:`Scenario` (named ``spec.name``)."""
+        return scenario_from_row(self.spec, self.params[i], self.thermals[i, : self.n_thermals[i]], self.start[i])
+
+
+def draw_scenario_arrays(rng: np.random.Generator, n: int, **kwargs: Any) -> ScenarioBatch:
+    """Draw ``n`` v2 random scenarios from ``rng`` at once (same generator state -> same batch).
+
+    :param rng: the only source of randomness (advanced by the uniforms read).
+    :param n: number of scenarios (>= 1).
+    :param kwargs: the keywords of :func:`~soaring_env.scenario.make_scenario` (same ranges, same
+        validation: a bad one raises a :class:`ConfigError` naming it).
+
+    Scenario ``j`` reads the uniforms after those of scenario ``j - 1``: ``draw_width`` per try.
+    A single env's reset draws ``draw_scenario_arrays(env.np_random, 1)``.
+    """
+    check_type("rng", rng, np.random.Generator)
+    return ScenarioSampler(kwargs).draw(rng, n)
