@@ -47,6 +47,8 @@ DEFAULT_BEAM_WIDTH = 500
 XC_SPEEDS = (12.5, 15.0, 18.0, 22.0)
 XC_TURNS_DEG = (-300.0, -150.0, -60.0, 0.0, 60.0, 150.0, 300.0)
 XC_PROGRESS_WEIGHT = 0.5
+#: First beam width of the cross-country reference's iterative widening (then doubled up to the knob).
+XC_START_WIDTH = 125
 
 
 @dataclass(frozen=True)
@@ -91,7 +93,8 @@ def reference_config(env: gym.Env, beam_width: int) -> HorizonConfig | Reference
     if not base.has_goal:
         return HorizonConfig(beam_width=beam_width)
     steps = int(round(base.config.time_limit / base.library.duration))
-    kw: dict[str, Any] = {"beam_width": beam_width, "start_width": beam_width, "max_edges": steps}
+    # iterative widening from a fixed first width: the best plan can only improve as the knob doubles
+    kw: dict[str, Any] = {"beam_width": beam_width, "start_width": min(XC_START_WIDTH, beam_width), "max_edges": steps}
     if base.continuous:
         kw.update(speeds=XC_SPEEDS, turns_deg=XC_TURNS_DEG, gammas_deg=(0.0,))
     return ReferenceConfig(**kw, progress_weight=XC_PROGRESS_WEIGHT)
