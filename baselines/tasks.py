@@ -49,6 +49,8 @@ XC_TURNS_DEG = (-300.0, -150.0, -60.0, 0.0, 60.0, 150.0, 300.0)
 XC_PROGRESS_WEIGHT = 0.5
 #: First beam width of the cross-country reference's iterative widening (then doubled up to the knob).
 XC_START_WIDTH = 125
+#: Bumped when the tasks' reference settings change (records of another version are redone).
+REFERENCE_VERSION = 2
 
 
 @dataclass(frozen=True)
@@ -65,7 +67,10 @@ class TaskJob:
         return f"{self.env_id}|{self.scenario}|{self.agent}|{self.seed}"
 
     def settings(self) -> dict[str, Any]:
-        return {"beam_width": self.beam_width} if self.agent == "reference" else {}
+        """What makes a finished record current (a rerun redoes records made otherwise)."""
+        if self.agent == "reference":
+            return {"beam_width": self.beam_width, "reference_version": REFERENCE_VERSION}
+        return {}
 
 
 def task_jobs(
@@ -133,7 +138,7 @@ def run_task_job(job: TaskJob) -> dict[str, Any]:
         actions, ref_stats = reference_plan(env, job.beam_width)
         if not ref_stats["found"]:
             env.close()
-            return {**_ids(job), "found": False, "reference": ref_stats}
+            return {**_ids(job), "job_settings": job.settings(), "found": False, "reference": ref_stats}
         agent = ReplayAgent(actions, name="reference")
     elif job.agent == "heuristic":
         agent = HeuristicAgent()
@@ -143,6 +148,7 @@ def run_task_job(job: TaskJob) -> dict[str, Any]:
         agent = RandomAgent()
     rec = run_episode(env, agent, sc, job.seed, keep_path=True)
     rec.update(_ids(job))
+    rec["job_settings"] = job.settings()
     rec["found"] = True
     rec["energy_gained"] = -rec["energy_spent"]
     if base.has_battery:

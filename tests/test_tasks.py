@@ -159,6 +159,27 @@ def test_cross_country_battery_runs_out() -> None:
     assert info["battery_left"] <= 0.0
 
 
+def test_cross_country_rewards_add_up() -> None:
+    """Sum of rewards = -energy / 1000 + the telescoped progress (3-D goal distance, per km) + the
+    terminal term; energy_spent = the summed edge costs."""
+    env = gym.make("soaring/CrossCountryContinuous-v0")
+    _, _ = env.reset(seed=4)
+    u = env.unwrapped
+    g = u.scenario.goal
+    d0 = float(g.distance(*u.state[[0, 1, 3]]))
+    total, costs, term, trunc = 0.0, 0.0, False, False
+    rng = np.random.default_rng(0)
+    while not (term or trunc):
+        _, r, term, trunc, info = env.step(rng.uniform(-1, 1, 3).astype(np.float32))
+        total += r
+        costs += info["edge_cost"]
+        assert r == pytest.approx(sum(info["reward_terms"].values()), abs=1e-12)
+    d1 = float(g.distance(*u.state[[0, 1, 3]]))
+    penalty = {"battery_empty": -25.0, "crash": -25.0, "out_of_bounds": -25.0, "goal": 25.0}[info["outcome"]]
+    assert info["energy_spent"] == pytest.approx(costs, rel=1e-12)
+    assert total == pytest.approx(-costs / 1000.0 + (d0 - d1) / 1000.0 + penalty, abs=1e-9)
+
+
 def test_stall_limit_masks_the_slow_primitives() -> None:
     lib = PrimitiveLibrary()
     model = SoaringModel(aircraft=Aircraft(cl_max=TEMPEST_CL_MAX))

@@ -99,12 +99,8 @@ def _key(e: dict[str, Any]) -> str:
 
 
 def _current(rec: dict[str, Any] | None, job: TaskJob) -> bool:
-    """A finished record made with the job's settings (the reference's beam width)."""
-    if rec is None:
-        return False
-    if job.agent != "reference":
-        return True
-    return rec.get("reference", {}).get("settings", {}).get("beam_width") == job.beam_width
+    """A finished record made with the job's settings (the reference's beam width and version)."""
+    return rec is not None and rec.get("job_settings", {}) == job.settings()
 
 
 def _convergence(args: Any) -> int:
