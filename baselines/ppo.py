@@ -6,6 +6,9 @@ Three algorithms share one code path (:data:`ALGOS`):
 * ``"masked"`` -- sb3-contrib ``MaskablePPO`` on the same env, with the env's ``action_masks()``;
 * ``"continuous"`` -- PPO with a Gaussian policy on ``soaring/SoaringContinuous-v0``.
 
+``TrainConfig(task=...)`` picks the task (:data:`TASKS`): goal reaching (default), the thermal climb
+or cross-country (``soaring_env.env.tasks``), with validation on that task's scenario family.
+
 Training draws a new random scenario from each env's ``np_random`` at every reset
 (``scenario="random"``); periodic evaluation runs on a fixed *validation* set of scenarios made by
 :func:`soaring_env.scenario.make_scenario` from seeds ``VALIDATION_SEED0 + k``, disjoint from the
@@ -31,7 +34,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -40,8 +43,14 @@ from soaring_env.scenario import HELDOUT_SEED0, Scenario, atomic_write_text, get
 
 DISCRETE_ID = "soaring/Soaring-v0"
 CONTINUOUS_ID = "soaring/SoaringContinuous-v0"
-#: Algorithm name -> env id it trains on.
+#: Algorithm name -> env id it trains on (goal reaching).
 ALGOS: dict[str, str] = {"discrete": DISCRETE_ID, "masked": DISCRETE_ID, "continuous": CONTINUOUS_ID}
+#: Task -> (env id of the primitive algorithms, env id of ``continuous``, scenario family).
+TASKS: dict[str, tuple[str, str, str]] = {
+    "goal": (DISCRETE_ID, CONTINUOUS_ID, "random"),
+    "climb": ("soaring/ThermalClimb-v0", "soaring/ThermalClimbContinuous-v0", "climb"),
+    "xc": ("soaring/CrossCountry-v0", "soaring/CrossCountryContinuous-v0", "xc"),
+}
 VEC_ENVS = ("dummy", "subproc")
 #: Seeds of the validation scenarios watched during training (test seeds start at 10 000).
 VALIDATION_SEED0 = 5_000
@@ -57,6 +66,8 @@ class TrainConfig:
     """Everything that defines a training run; saved verbatim as ``config.json`` beside the model.
 
     :param algo: ``"discrete"``, ``"masked"`` or ``"continuous"`` (see :data:`ALGOS`).
+    :param task: ``"goal"`` (goal reaching, default), ``"climb"`` (thermal climb) or ``"xc"``
+        (cross-country): the env ids of :data:`TASKS`; validation on that task's scenario family.
     :param total_timesteps: environment steps (one primitive or control segment each) to train for.
     :param max_minutes: wall-clock cap on training [min]; stops early, saving the model (None: no cap).
     :param n_envs: parallel environments; more give PPO more diverse scenarios per update.
@@ -82,6 +93,7 @@ class TrainConfig:
         the env's own reward (which already has a telescoping progress term) unchanged.
     :param body_frame: observe through :class:`BodyFrameObservation` (goal, wind and thermal offsets
         in the aircraft's frame, plus goal distance and bearing): the policy need not learn rotations.
+        None (default): on (:class:`BodyFrame` finds the pairs of any task's layout by name).
     :param turn_exponent: continuous only: the policy's turn channel is mapped through
         :class:`TurnCurveAction` (``sign(u) |u|^p``) for fine steering; 1 switches it off.
     :param env_kwargs: keyword arguments for ``gym.make`` (config fields of the env); the scenario
@@ -95,6 +107,7 @@ class TrainConfig:
     """
 
     algo: str = "masked"
+    task: str = "goal"
     total_timesteps: int = 1_000_000
     max_minutes: float | None = None
     n_envs: int = 8
@@ -114,7 +127,7 @@ class TrainConfig:
     net_arch: tuple[int, ...] = (128, 128)
     log_std_init: float = -0.5
     shaping: float = 0.0
-    body_frame: bool = True
+    body_frame: bool | None = None
     turn_exponent: float = 3.0
     env_kwargs: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     eval_freq: int = 25_000
@@ -127,6 +140,10 @@ class TrainConfig:
     def __post_init__(self) -> None:
         if self.algo not in ALGOS:
             raise ValueError(f"algo={self.algo!r} is unknown; known: {', '.join(ALGOS)}")
+        if self.task not in TASKS:
+            raise ValueError(f"task={self.task!r} is unknown; known: {', '.join(TASKS)}")
+        if self.body_frame is None:
+            object.__setattr__(self, "body_frame", True)
         if self.vec_env not in VEC_ENVS:
             raise ValueError(f"vec_env={self.vec_env!r} is unknown; known: {', '.join(VEC_ENVS)}")
         for name in ("total_timesteps", "n_envs", "n_steps", "batch_size", "n_epochs", "n_eval_scenarios"):
@@ -147,8 +164,14 @@ class TrainConfig:
 
     @property
     def env_id(self) -> str:
-        """The env this algorithm trains on."""
-        return ALGOS[self.algo]
+        """The env this algorithm trains on (the task's, :data:`TASKS`)."""
+        discrete, continuous, _ = TASKS[self.task]
+        return continuous if self.algo == "continuous" else discrete
+
+    @property
+    def family(self) -> str:
+        """The task's scenario family (validation scenarios ``<family>-5000 ...``)."""
+        return TASKS[self.task][2]
 
     def to_dict(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)
@@ -236,26 +259,76 @@ def body_frame(obs: np.ndarray, n_base: int = 11, n_thermal_features: int = 5) -
     return res.reshape(*o.shape[:-1], res.shape[-1])
 
 
+class BodyFrame:
+    """:func:`body_frame` for any observation layout, found by the entries' names (``sin_course``,
+    ``cos_course`` and every ``*_north`` / ``*_east`` pair: goal, wind, thermal slots); the goal's
+    distance and bearing are appended only where the layout has a goal. For the goal-reaching
+    layout it computes exactly :func:`body_frame`. Picklable (it holds only indices).
+
+    :param names: the env's ``observation_names``.
+    """
+
+    def __init__(self, names: Sequence[str]) -> None:
+        names = list(names)
+        where = {n: i for i, n in enumerate(names)}
+        self.course = (where["sin_course"], where["cos_course"])
+        self.pairs = [(i, where[n[: -len("north")] + "east"]) for i, n in enumerate(names) if n.endswith("_north")]
+        self.goal = (where["goal_north"], where["goal_east"]) if "goal_north" in where else None
+        self.size = len(names)
+
+    def __call__(self, obs: Any) -> np.ndarray:
+        o = np.asarray(obs, dtype=np.float32)
+        x = o.reshape(-1, o.shape[-1]).astype(np.float64)
+        s, c = x[:, self.course[0]], x[:, self.course[1]]
+        out = x.copy()
+        for i, k in self.pairs:
+            out[:, i] = x[:, i] * c + x[:, k] * s
+            out[:, k] = -x[:, i] * s + x[:, k] * c
+        parts = [out]
+        if self.goal is not None:
+            gi, gk = self.goal
+            dist = np.hypot(x[:, gi], x[:, gk])
+            safe = np.where(dist > 1e-9, dist, 1.0)
+            parts.append(
+                np.stack(
+                    [
+                        dist,
+                        np.where(dist > 1e-9, out[:, gk] / safe, 0.0),
+                        np.where(dist > 1e-9, out[:, gi] / safe, 1.0),
+                    ],
+                    axis=1,
+                )
+            )
+        res = np.concatenate(parts, axis=1).astype(np.float32)
+        return res.reshape(*o.shape[:-1], res.shape[-1])
+
+    def space(self, space: gym.spaces.Box) -> gym.spaces.Box:
+        """The observation space after the transform: rotated pairs widen by sqrt(2)."""
+        low = space.low.astype(np.float64).copy()
+        high = space.high.astype(np.float64).copy()
+        for i, k in self.pairs:
+            for j in (i, k):
+                m = max(abs(low[j]), abs(high[j]))
+                low[j], high[j] = -m * math.sqrt(2.0), m * math.sqrt(2.0)
+        if self.goal is not None:
+            r = float(np.hypot(space.high[self.goal[0]], space.high[self.goal[1]]))  # |(n, e)| at most
+            low = np.concatenate([low, [0.0, -1.0, -1.0]])
+            high = np.concatenate([high, [r, 1.0, 1.0]])
+        return gym.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
+
+
 class BodyFrameObservation(gym.ObservationWrapper):
-    """Observation wrapper applying :func:`body_frame` (see there); bounds widen accordingly."""
+    """Observation wrapper applying :class:`BodyFrame` of the env's layout; bounds widen accordingly."""
 
     def __init__(self, env: gym.Env) -> None:
         super().__init__(env)
         space = env.observation_space
         assert isinstance(space, gym.spaces.Box)
-        r = float(np.hypot(space.high[0], space.high[1]))  # a rotated pair can reach |(n, e)|
-        low = space.low.astype(np.float64).copy()
-        high = space.high.astype(np.float64).copy()
-        n_th = (space.shape[0] - 11) // 5
-        for i in [0, 1, 9, 10] + [11 + 5 * j + d for j in range(n_th) for d in (1, 2)]:
-            m = max(abs(low[i]), abs(high[i]))
-            low[i], high[i] = -m * math.sqrt(2.0), m * math.sqrt(2.0)
-        low = np.concatenate([low, [0.0, -1.0, -1.0]])
-        high = np.concatenate([high, [r, 1.0, 1.0]])
-        self.observation_space = gym.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
+        self.transform = BodyFrame(cast(Any, env.unwrapped).observation_names)
+        self.observation_space = self.transform.space(space)
 
     def observation(self, observation: np.ndarray) -> np.ndarray:
-        return body_frame(observation)
+        return self.transform(observation)
 
 
 def turn_curve(action: Any, exponent: float) -> np.ndarray:
@@ -302,11 +375,14 @@ class ScenarioCycle(gym.Wrapper):
         return self.env.reset(seed=seed, options=opts)
 
 
-def validation_scenarios(n: int, random_scenario: Mapping[str, Any] | None = None) -> list[Scenario]:
-    """The ``n`` validation scenarios (seeds ``VALIDATION_SEED0 ...``), disjoint from the test seeds."""
+def validation_scenarios(
+    n: int, random_scenario: Mapping[str, Any] | None = None, family: str = "random"
+) -> list[Scenario]:
+    """The ``n`` validation scenarios ``<family>-5000 ...`` (seeds ``VALIDATION_SEED0 ...``),
+    disjoint from the test seeds."""
     if n > HELDOUT_SEED0 - VALIDATION_SEED0:
         raise ValueError(f"at most {HELDOUT_SEED0 - VALIDATION_SEED0} validation scenarios")
-    return [get_scenario(f"random-{VALIDATION_SEED0 + k}", random_scenario) for k in range(n)]
+    return [get_scenario(f"{family}-{VALIDATION_SEED0 + k}", random_scenario) for k in range(n)]
 
 
 def make_train_env(
@@ -359,7 +435,10 @@ def observation_transform(run_record: Mapping[str, Any]) -> Callable[[Any], Any]
     policy runs in the plain registered env.
     """
     cfg = run_record.get("config", run_record)
-    return body_frame if cfg.get("body_frame", False) else None
+    if not cfg.get("body_frame", False):
+        return None
+    names = run_record.get("observation_names")
+    return body_frame if names is None else BodyFrame(names)  # runs saved before the tasks: goal layout
 
 
 def action_transform(run_record: Mapping[str, Any]) -> Callable[[Any], Any] | None:
@@ -435,7 +514,8 @@ def _eval_callback(config: TrainConfig, eval_env: Any, out_dir: Path, t_start: f
             super()._log_success_callback(locals_, globals_)
             if locals_["done"]:
                 info = locals_["info"]
-                if info.get("is_success") and "energy_spent" in info:
+                # goal tasks: the energy of successful episodes; the climb (no goal): of every episode
+                if (info.get("is_success") or config.task == "climb") and "energy_spent" in info:
                     self._energy.append(float(info["energy_spent"]))
 
         def _on_step(self) -> bool:
@@ -457,10 +537,13 @@ def _eval_callback(config: TrainConfig, eval_env: Any, out_dir: Path, t_start: f
                 self.logger.record("eval/success_rate_validation", rec["success_rate"])
                 if config.verbose >= 0:
                     e = rec["mean_energy_success"]
+                    what = "energy"
+                    if config.task == "climb" and e is not None:
+                        e, what = -e, "energy gained"
                     print(
                         f"[{config.algo}] {rec['timesteps']:>9d} steps {rec['wall_s'] / 60:5.1f} min: "
                         f"validation success {100 * rec['success_rate']:5.1f} %, return {rec['mean_return']:6.2f}, "
-                        f"energy {'-' if e is None else f'{e / 1000:.2f} kJ/kg'}",
+                        f"{what} {'-' if e is None else f'{e / 1000:.2f} kJ/kg'}",
                         flush=True,
                     )
                 atomic_write_text(out_dir / "eval_log.json", json.dumps(self.records, indent=1))
@@ -490,6 +573,11 @@ def _wall_clock_callback(max_minutes: float, t_start: float) -> Any:
     return StopOnWallClock()
 
 
+def _probe(config: TrainConfig) -> Any:
+    """A raw env of ``config`` (for its observation layout)."""
+    return gym.make(_module_qualified(config.env_id), **dict(config.env_kwargs)).unwrapped
+
+
 def train(config: TrainConfig, out_dir: str | Path) -> Path:
     """Train ``config`` and write the run directory ``out_dir`` (see the module docstring).
 
@@ -509,6 +597,8 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
         "env_id": config.env_id,
         "algo": config.algo,
         "status": "running",
+        # the layout the policy was trained on (its body-frame transform is built from it)
+        "observation_names": list(_probe(config).observation_names),
         "versions": _versions(),
         "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
     }
@@ -525,15 +615,17 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
             "env_kwargs": config.env_kwargs,
             "shaping": config.shaping,
             "gamma": config.gamma,
-            "body_frame": config.body_frame,
+            "body_frame": bool(config.body_frame),
             "turn_exponent": config.turn_exponent,
         },
     )
-    scenarios = validation_scenarios(config.n_eval_scenarios, random_scenario_kwargs(config.env_kwargs))
+    scenarios = validation_scenarios(config.n_eval_scenarios, random_scenario_kwargs(config.env_kwargs), config.family)
     eval_env = DummyVecEnv(
         [
             lambda: Monitor(
-                make_eval_env(config.env_id, scenarios, config.env_kwargs, config.body_frame, config.turn_exponent)
+                make_eval_env(
+                    config.env_id, scenarios, config.env_kwargs, bool(config.body_frame), config.turn_exponent
+                )
             )
         ]
     )

@@ -19,12 +19,14 @@ import statistics
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
-from baselines.agents import HeuristicAgent, RandomAgent, ReplayAgent
+from baselines._runs import read_json
+from baselines.agents import HeuristicAgent, PPOAgent, RandomAgent, ReplayAgent
 from baselines.evaluation import run_episode
 from baselines.reference.beam import ReferenceConfig, search
 from baselines.reference.horizon import HorizonConfig, energy_search
@@ -39,6 +41,8 @@ TASK_FAMILIES = {
     "soaring/CrossCountryContinuous-v0": "xc",
 }
 AGENTS = ("reference", "heuristic", "direct", "random")
+#: The label of a trained PPO run's rows (``task_jobs(ppo_runs=...)``).
+PPO = "ppo"
 #: Beam width of the tasks' reference searches (the accuracy knob; ``--beam-width``).
 DEFAULT_BEAM_WIDTH = 500
 #: The cross-country reference's continuous control set for Ts = 10 s: the beam's grid of airspeeds
@@ -62,6 +66,8 @@ class TaskJob:
     agent: str
     seed: int
     beam_width: int = DEFAULT_BEAM_WIDTH
+    #: the PPO run directory (agent ``"ppo"``; its ``model.zip`` and ``config.json``)
+    run: str = ""
 
     def key(self) -> str:
         return f"{self.env_id}|{self.scenario}|{self.agent}|{self.seed}"
@@ -70,17 +76,35 @@ class TaskJob:
         """What makes a finished record current (a rerun redoes records made otherwise)."""
         if self.agent == "reference":
             return {"beam_width": self.beam_width, "reference_version": REFERENCE_VERSION}
+        if self.agent == PPO:
+            model = Path(self.run) / "model.zip"
+            return {"run": self.run, "model_mtime": model.stat().st_mtime if model.exists() else None}
         return {}
 
 
 def task_jobs(
-    env_ids: Sequence[str], n_scenarios: int, agents: Sequence[str], beam_width: int = DEFAULT_BEAM_WIDTH
+    env_ids: Sequence[str],
+    n_scenarios: int,
+    agents: Sequence[str],
+    beam_width: int = DEFAULT_BEAM_WIDTH,
+    ppo_runs: Sequence[str] = (),
 ) -> list[TaskJob]:
-    """Every (task id, held-out scenario, agent) job, seed 0."""
+    """Every (task id, held-out scenario, agent) job, seed 0; each PPO run directory adds agent
+    ``"ppo"`` on the task id it was trained on (its ``config.json``)."""
     for e in env_ids:
         check_choice("env_id", e, tuple(TASK_FAMILIES))
     for a in agents:
         check_choice("agent", a, AGENTS)
+    runs: dict[str, str] = {}
+    for r in ppo_runs:
+        cfg = Path(r) / "config.json"
+        if not cfg.is_file():
+            raise ConfigError(f"ppo run {r!r} has no config.json; give a directory written by scripts/train_ppo.py")
+        env_id = str(read_json(cfg, "PPO run configuration").get("env_id"))
+        check_choice(f"the env id of ppo run {r!r}", env_id, tuple(TASK_FAMILIES))
+        if env_id in runs:
+            raise ConfigError(f"two ppo runs for {env_id}: {runs[env_id]!r} and {r!r}; give one per task id")
+        runs[env_id] = str(r)
     jobs = []
     for env_id in env_ids:
         fam = TASK_FAMILIES[env_id]
@@ -89,6 +113,8 @@ def task_jobs(
                 if agent == "direct" and fam != "xc":
                     continue  # no goal to fly to
                 jobs.append(TaskJob(env_id, sc, agent, 0, beam_width))
+            if env_id in runs:
+                jobs.append(TaskJob(env_id, sc, PPO, 0, beam_width, runs[env_id]))
     return jobs
 
 
@@ -144,6 +170,8 @@ def run_task_job(job: TaskJob) -> dict[str, Any]:
         agent = HeuristicAgent()
     elif job.agent == "direct":
         agent = HeuristicAgent(lift_threshold=math.inf, name="direct")  # never circles
+    elif job.agent == PPO:
+        agent = PPOAgent(job.run, name=PPO)
     else:
         agent = RandomAgent()
     rec = run_episode(env, agent, sc, job.seed, keep_path=True)
@@ -178,7 +206,7 @@ def summarize(episodes: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     }
     rows = []
     for env_id in TASK_FAMILIES:
-        for agent in AGENTS:
+        for agent in (*AGENTS, PPO):
             eps = [e for e in episodes if e["env_id"] == env_id and e["agent"] == agent]
             if not eps:
                 continue

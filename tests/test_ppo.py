@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -18,6 +19,8 @@ from baselines.evaluation import EvalConfig, resolve_scenario, run_evaluation
 from baselines.ppo import (
     ALGOS,
     DISCRETE_ID,
+    TASKS,
+    BodyFrame,
     BodyFrameObservation,
     GoalDistanceShaping,
     ScenarioCycle,
@@ -152,3 +155,40 @@ def test_turn_curve_keeps_the_envelope_and_refines_small_turns() -> None:
     a = turn_curve(np.array([0.2, 0.5, -0.3], dtype=np.float32), 3.0)
     assert a[0] == pytest.approx(0.2) and a[2] == pytest.approx(-0.3) and a[1] == pytest.approx(0.125)
     assert turn_curve(np.array([0.0, -1.0, 1.0]), 3.0)[1] == -1.0
+
+
+@pytest.mark.parametrize("task", ["climb", "xc"])
+def test_tiny_task_run_trains_saves_loads_and_evaluates(task: str, tmp_path: Path) -> None:
+    """PPO on a task: the task's env id and validation scenarios, the observation layout saved with
+    the run, and the trained policy scored by the task table (through env.step, deterministic)."""
+    from baselines.tasks import TaskJob, run_task_job
+
+    cfg = dataclasses.replace(_tiny("continuous"), task=task)
+    assert cfg.env_id == TASKS[task][1] and cfg.family == task and cfg.body_frame is True
+    run = train(cfg, tmp_path / task)
+    record = json.loads((run / "config.json").read_text())
+    assert record["env_id"] == cfg.env_id and "time_left" in record["observation_names"]
+    job = TaskJob(cfg.env_id, f"{task}-10000", "ppo", 0, run=str(run))
+    a, b = run_task_job(job), run_task_job(job)
+    assert a["agent"] == "ppo" and a["energy_spent"] == b["energy_spent"] and a["decisions"] >= 1
+    assert validation_scenarios(2, None, task)[0].name == f"{task}-5000"
+
+
+def test_body_frame_of_any_layout() -> None:
+    """BodyFrame finds the pairs by name: on the goal layout it is body_frame exactly; on the climb
+    layout (no goal entries) it rotates the wind and thermal offsets and appends nothing."""
+    env = gym.make("soaring/Soaring-v0", scenario="random")
+    obs = np.array([env.reset(seed=s)[0] for s in range(5)])
+    bf = BodyFrame(env.unwrapped.observation_names)
+    assert np.array_equal(bf(obs), body_frame(obs))
+    climb = gym.make("soaring/ThermalClimbContinuous-v0")
+    o, _ = climb.reset(seed=1)
+    names = climb.unwrapped.observation_names
+    t = BodyFrame(names)(o)
+    assert t.shape == o.shape
+    s, c = o[names.index("sin_course")], o[names.index("cos_course")]
+    n, e = o[names.index("thermal_0_north")], o[names.index("thermal_0_east")]
+    assert t[names.index("thermal_0_north")] == pytest.approx(n * c + e * s, abs=1e-6)  # ahead
+    assert t[names.index("thermal_0_east")] == pytest.approx(-n * s + e * c, abs=1e-6)  # right
+    with pytest.raises(ValueError, match="task"):
+        TrainConfig(task="soar")

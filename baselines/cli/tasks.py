@@ -5,6 +5,7 @@ scenarios of every task id (thermal climb, cross-country; primitives and continu
     python scripts/tasks.py --scenarios 3 --envs soaring/ThermalClimbContinuous-v0
     python scripts/tasks.py --beam-width 1000     # the reference's accuracy knob
     python scripts/tasks.py --convergence         # climb-10000, xc-10000: reference at 1/2, 1, 2 x the width
+    python scripts/tasks.py --ppo results/ppo-climb/continuous   # adds a trained PPO run's rows
 
 Writes ``results/tasks/results.json`` (every episode, atomically after each; a rerun resumes and
 redoes only missing or changed jobs; one run per folder at a time), ``table.md`` and
@@ -47,6 +48,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--scenarios", type=int, default=10, help="held-out scenarios per task id (default 10)")
     p.add_argument("--agents", nargs="+", choices=AGENTS, default=list(AGENTS), help="agents")
     p.add_argument("--beam-width", type=int, default=DEFAULT_BEAM_WIDTH, help="the reference search's accuracy knob")
+    p.add_argument(
+        "--ppo", nargs="+", default=[], metavar="RUN", help="PPO run directories (scripts/train_ppo.py --task ...)"
+    )
     add_backend_args(p, "2")
     p.add_argument("--out", type=Path, default=Path("results/tasks"), help="output directory")
     p.add_argument("--convergence", action="store_true", help="the reference at 1/2, 1 and 2 x the beam width")
@@ -57,7 +61,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.convergence:
             return _convergence(args)
-        jobs = task_jobs(args.envs, args.scenarios, args.agents, args.beam_width)
+        jobs = task_jobs(args.envs, args.scenarios, args.agents, args.beam_width, args.ppo)
         return _run(jobs, args)
     except ConfigError as exc:
         p.error(str(exc))
@@ -142,7 +146,7 @@ def _figure(episodes: list[dict[str, Any]], path: Path) -> None:
     fig, axes = plt.subplots(rows, cols, figsize=(6.0 * cols, 5.6 * rows), squeeze=False)
     for ax in axes.ravel()[len(ids) :]:
         ax.set_visible(False)
-    colours = {"reference": "#1a8f3a", "heuristic": "#1f3b73", "direct": "#d35400", "random": "0.5"}
+    colours = {"reference": "#1a8f3a", "heuristic": "#1f3b73", "direct": "#d35400", "random": "0.5", "ppo": "#8e44ad"}
     for ax, env_id in zip(axes.ravel(), ids, strict=False):
         first = min(ep["scenario"] for ep in episodes if ep["env_id"] == env_id)
         sc = get_scenario(first)

@@ -32,7 +32,7 @@ from typing import Any
 
 from baselines._runs import add_backend_args, check_cli_args, cli_workers
 from baselines.backends import run_jobs
-from baselines.ppo import ALGOS, TrainConfig, plot_learning_curve, train
+from baselines.ppo import ALGOS, TASKS, TrainConfig, plot_learning_curve, train
 from soaring_env._validation import ConfigError
 
 #: Wall-clock shares of ``--minutes`` for ``--algo all`` (masked PPO steps ~4x slower: the masks
@@ -81,6 +81,12 @@ def main(argv: list[str] | None = None) -> int:
     """Command-line entry point; returns the exit status."""
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--algo", default="all", choices=[*ALGOS, "all"], help="variant(s) to train (default: all)")
+    p.add_argument(
+        "--task",
+        default="goal",
+        choices=list(TASKS),
+        help="goal reaching (default), climb (ThermalClimb*-v0) or xc (CrossCountry*-v0)",
+    )
     p.add_argument("--timesteps", type=int, default=None, help="env steps per variant (default: TrainConfig's)")
     p.add_argument(
         "--minutes",
@@ -122,6 +128,8 @@ def main(argv: list[str] | None = None) -> int:
     algos = list(ALGOS) if args.algo == "all" else [args.algo]
     # several seeds at a time: their progress bars would fight over the terminal
     overrides: dict[str, Any] = {"progress_bar": not args.no_progress and (not multi or workers == 1)}
+    if args.task != "goal":
+        overrides["task"] = args.task
     for name, val in (
         ("total_timesteps", args.timesteps),
         ("n_envs", args.n_envs),
@@ -138,7 +146,7 @@ def main(argv: list[str] | None = None) -> int:
     try:  # check the settings here, before any job starts
         for algo in algos:
             TrainConfig(algo=algo, **overrides)
-    except (ConfigError, TypeError) as exc:
+    except (ConfigError, TypeError, ValueError) as exc:
         p.error(str(exc))
     root = Path(args.out)
     jobs = [
