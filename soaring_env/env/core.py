@@ -533,9 +533,10 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         code = int(self._codes[0])
         k = int(self._ks[0])
         fuel, potential, kinetic, cost, bank, _ = terms[0].tolist()
-        self.battery_left -= fuel + kinetic
-        if code == FLYING and self.battery_left <= 0.0:
-            code = BATTERY_EMPTY
+        if self.has_battery:  # the motor's energy: fuel and the speed change's kinetic charge
+            self.battery_left -= fuel + kinetic
+            if code == FLYING and self.battery_left <= 0.0:
+                code = BATTERY_EMPTY
         if self._extras or self._hist_len:
             self._push_history(
                 self._history,
