@@ -711,7 +711,8 @@ def plot_learning_curve(
 ) -> Path:
     """Learning curve(s) from ``eval_log.json`` file(s), on the fixed validation scenarios: success
     rate against timesteps and against wall-clock minutes, mean return, and the mean energy of the
-    successful episodes [kJ/kg]."""
+    successful episodes [kJ/kg]. Thermal-climb runs (no goal: ``config.json`` beside the log) show
+    the mean energy gained [kJ/kg] where the others show success, and the energy of every episode."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -721,27 +722,37 @@ def plot_learning_curve(
     names = list(labels) if labels is not None else [Path(p).parent.name for p in paths]
     fig, axes = plt.subplots(2, 2, figsize=(11, 7.5), constrained_layout=True)
     (ax_s, ax_w), (ax_r, ax_e) = axes
+    climbs = []
     for p, name in zip(paths, names, strict=True):
         recs = json.loads(Path(p).read_text())
         if not recs:
             continue
+        cfg = Path(p).parent / "config.json"
+        climb = cfg.is_file() and json.loads(cfg.read_text()).get("config", {}).get("task") == "climb"
+        climbs.append(climb)
         ts = np.array([r["timesteps"] for r in recs])
         wall = np.array([r["wall_s"] for r in recs]) / 60.0
-        succ = [100.0 * r["success_rate"] for r in recs]
         energy = [np.nan if r["mean_energy_success"] is None else r["mean_energy_success"] / 1000 for r in recs]
+        succ = [-e for e in energy] if climb else [100.0 * r["success_rate"] for r in recs]
         (line,) = ax_s.plot(ts, succ, marker=".", label=name)
         ax_w.plot(wall, succ, marker=".", color=line.get_color(), label=name)
         ax_r.plot(ts, [r["mean_return"] for r in recs], marker=".", color=line.get_color(), label=name)
         ax_e.plot(ts, energy, marker=".", color=line.get_color(), label=name)
-    ax_s.set_ylabel("validation success rate [%]")
-    ax_w.set_ylabel("validation success rate [%]")
+    top = "validation success rate [%]"
+    if climbs and all(climbs):
+        top = "validation energy gained [kJ/kg]"
+    elif any(climbs):
+        top = "validation success [%] / energy gained (climb) [kJ/kg]"
+    ax_s.set_ylabel(top)
+    ax_w.set_ylabel(top)
     ax_w.set_xlabel("wall-clock training time [min]")
     ax_r.set_ylabel("validation mean return")
-    ax_e.set_ylabel("energy spent, successful episodes [kJ/kg]")
+    ax_e.set_ylabel("energy spent [kJ/kg]: successful episodes (climb: all)")
     for ax in (ax_s, ax_r, ax_e):
         ax.set_xlabel("timesteps")
-    for ax in (ax_s, ax_w):
-        ax.set_ylim(-2, 102)
+    if not any(climbs):
+        for ax in (ax_s, ax_w):
+            ax.set_ylim(-2, 102)
     for ax in axes.ravel():
         ax.grid(alpha=0.3)
         ax.legend(loc="best", fontsize=8)
