@@ -27,7 +27,7 @@ import numpy as np
 
 from baselines._runs import read_json
 from baselines.agents import HeuristicAgent, PPOAgent, RandomAgent, ReplayAgent
-from baselines.evaluation import run_episode
+from baselines.evaluation import bootstrap_ci, run_episode
 from baselines.reference.beam import ReferenceConfig, search
 from baselines.reference.horizon import HorizonConfig, energy_search
 from soaring_env._validation import ConfigError, check_choice
@@ -198,7 +198,8 @@ def _ids(job: TaskJob) -> dict[str, Any]:
 
 def summarize(episodes: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     """One row per (task id, agent): episodes, successes, median energy gained, median fraction of
-    the reference's energy (climb; per scenario, where the reference gained energy), battery left."""
+    the reference's energy (climb; per scenario, where the reference gained energy), each with a
+    seeded percentile-bootstrap 95 % interval, and the battery left."""
     ref = {
         (e["env_id"], e["scenario"]): e["energy_gained"]
         for e in episodes
@@ -228,8 +229,8 @@ def summarize(episodes: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
                     "episodes": len(eps),
                     "no_plan": len(eps) - len(flown),
                     "success": sum(bool(e["success"]) for e in flown),
-                    "energy_gained_median": statistics.median(gained) if gained else math.nan,
-                    "fraction_of_reference_median": statistics.median(frac) if frac else math.nan,
+                    "energy_gained_median": bootstrap_ci(gained, np.median),
+                    "fraction_of_reference_median": bootstrap_ci(frac, np.median),
                     "battery_left_median": statistics.median(battery) if battery else math.nan,
                     "outcomes": outcomes,
                 }
@@ -240,12 +241,18 @@ def summarize(episodes: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
 def markdown_table(rows: Sequence[Mapping[str, Any]]) -> str:
     """The summary as a markdown table (energies in kJ/kg)."""
 
-    def num(v: float, fmt: str, unit: str = "") -> str:
-        return "—" if v is None or (isinstance(v, float) and math.isnan(v)) else format(v, fmt) + unit
+    def num(v: Any, fmt: str, unit: str = "", scale: float = 1.0) -> str:
+        """A number, or (value, low, high) as "value [low, high]" (a 95 % interval over > 1 episode)."""
+        if isinstance(v, tuple):
+            if math.isnan(v[0]):
+                return "—"
+            ci = f" [{v[1] * scale:{fmt}}, {v[2] * scale:{fmt}}]" if v[1] != v[2] else ""
+            return format(v[0] * scale, fmt) + unit + ci
+        return "—" if v is None or math.isnan(v) else format(v * scale, fmt) + unit
 
     lines = [
-        "| task id | agent | episodes | success | energy gained, median [kJ/kg] | of the reference's (median) "
-        "| battery left (median) | outcomes |",
+        "| task id | agent | episodes | success | energy gained, median [95 % CI] [kJ/kg] "
+        "| of the reference's (median [95 % CI]) | battery left (median) | outcomes |",
         "|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
@@ -257,9 +264,9 @@ def markdown_table(rows: Sequence[Mapping[str, Any]]) -> str:
         outcomes = ", ".join(f"{k} {v}" for k, v in sorted(r["outcomes"].items()))
         lines.append(
             f"| `{r['env_id'].split('/')[1]}` | {r['agent']} | {r['episodes']} | {succ} | "
-            f"{num(r['energy_gained_median'] / 1000.0, '.2f')} | "
-            f"{'—' if xc else num(r['fraction_of_reference_median'] * 100.0, '.0f', ' %')} | "
-            f"{num(r['battery_left_median'] * 100.0, '.0f', ' %') if xc else '—'} | {outcomes} |"
+            f"{num(r['energy_gained_median'], '.2f', scale=1e-3)} | "
+            f"{'—' if xc else num(r['fraction_of_reference_median'], '.0f', ' %', 100.0)} | "
+            f"{num(r['battery_left_median'], '.0f', ' %', 100.0) if xc else '—'} | {outcomes} |"
         )
     return "\n".join(lines) + "\n"
 
