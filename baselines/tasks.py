@@ -43,6 +43,8 @@ TASK_FAMILIES = {
 AGENTS = ("reference", "heuristic", "direct", "random")
 #: The label of a trained PPO run's rows (``task_jobs(ppo_runs=...)``).
 PPO = "ppo"
+#: The scenario whose flown paths the results keep (the trajectories figure's), per family.
+FIGURE_SCENARIO = {"climb": "climb-10000", "xc": "xc-10000"}
 #: Beam width of the tasks' reference searches (the accuracy knob; ``--beam-width``).
 DEFAULT_BEAM_WIDTH = 500
 #: The cross-country reference's continuous control set for Ts = 10 s: the beam's grid of airspeeds
@@ -174,7 +176,8 @@ def run_task_job(job: TaskJob) -> dict[str, Any]:
         agent = PPOAgent(job.run, name=PPO)
     else:
         agent = RandomAgent()
-    rec = run_episode(env, agent, sc, job.seed, keep_path=True)
+    # flown points only for the first held-out scenario of each id (the figure's): files stay small
+    rec = run_episode(env, agent, sc, job.seed, keep_path=job.scenario == FIGURE_SCENARIO[TASK_FAMILIES[job.env_id]])
     rec.update(_ids(job))
     rec["job_settings"] = job.settings()
     rec["found"] = True

@@ -26,6 +26,7 @@ from baselines.backends import run_jobs
 from baselines.tasks import (
     AGENTS,
     DEFAULT_BEAM_WIDTH,
+    FIGURE_SCENARIO,
     TASK_FAMILIES,
     TaskJob,
     check_episodes,
@@ -134,7 +135,8 @@ def _convergence(args: Any) -> int:
 
 
 def _figure(episodes: list[dict[str, Any]], path: Path) -> None:
-    """Each task id's first held-out scenario: thermals (at t = 0), goal, and every agent's path."""
+    """Each task id's first held-out scenario (:data:`FIGURE_SCENARIO`): thermals (at t = 0), goal,
+    and every agent's path."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -148,7 +150,7 @@ def _figure(episodes: list[dict[str, Any]], path: Path) -> None:
         ax.set_visible(False)
     colours = {"reference": "#1a8f3a", "heuristic": "#1f3b73", "direct": "#d35400", "random": "0.5", "ppo": "#8e44ad"}
     for ax, env_id in zip(axes.ravel(), ids, strict=False):
-        first = min(ep["scenario"] for ep in episodes if ep["env_id"] == env_id)
+        first = FIGURE_SCENARIO[TASK_FAMILIES[env_id]]
         sc = get_scenario(first)
         for t in sc.field.thermals:
             alpha = min(0.25 + 0.1 * t.strength, 0.9)  # 100 m discs: about the cores' radius at 500 m
