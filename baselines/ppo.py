@@ -753,6 +753,8 @@ def plot_learning_curve(
     if not any(climbs):
         for ax in (ax_s, ax_w):
             ax.set_ylim(-2, 102)
+    if not any(line.get_ydata().size and np.isfinite(np.asarray(line.get_ydata(), float)).any() for line in ax_e.lines):
+        ax_e.text(0.5, 0.5, "no successful validation episode", transform=ax_e.transAxes, ha="center", fontsize=10)
     for ax in axes.ravel():
         ax.grid(alpha=0.3)
         ax.legend(loc="best", fontsize=8)
