@@ -32,7 +32,16 @@ import numpy as np
 from soaring_env._validation import ConfigError
 from soaring_env.primitives import COL_AIRSPEED, COL_CHI_DOT_1, COL_CHI_DOT_2, COL_FAMILY, COL_GAMMA, SPIRAL
 
-__all__ = ["Agent", "HeuristicAgent", "PPOAgent", "RandomAgent", "ReplayAgent", "SSTPlannerAgent", "action_mask_of"]
+__all__ = [
+    "Agent",
+    "HeuristicAgent",
+    "PPOAgent",
+    "RandomAgent",
+    "ReplayAgent",
+    "SSTPlannerAgent",
+    "ThermallingAgent",
+    "action_mask_of",
+]
 
 
 @runtime_checkable
@@ -110,6 +119,16 @@ class RandomAgent:
 LOOKAHEAD = 5000.0
 
 
+def flattest_glide(model: Any) -> tuple[float, float]:
+    """(airspeed [m/s], path angle [rad]) of the flattest zero-thrust straight glide in the model's
+    continuous envelope (21 airspeeds; the glide angle that needs no thrust anywhere below the
+    domain's ceiling): the best-L/D cruise."""
+    speeds = np.linspace(float(model.control_low[0]), float(model.control_high[0]), 21)
+    glide = model.aircraft.glide_angle(speeds, 0.0, model.scenario.bounds.height_max)
+    k = int(np.argmax(glide))
+    return float(speeds[k]), float(glide[k])
+
+
 def _wrap(angle: float) -> float:
     """Angle wrapped to [-pi, pi)."""
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
@@ -170,47 +189,58 @@ class HeuristicAgent:
     # --- the rule ----------------------------------------------------------------------------
     def intent(self) -> tuple[float, float, float]:
         """The wanted control for the next step: (airspeed [m/s], total turn [rad], path angle [rad])."""
-        env = self._require_env()
-        base: Any = env.unwrapped
+        base: Any = self._require_env().unwrapped
+        pn, pe, chi, h = (float(v) for v in np.asarray(base.state, dtype=np.float64)[:4])
+        t = float(getattr(base, "time", 0.0))
+        v_slow = float(base.model.library.table[:, COL_AIRSPEED].min())
+        w_here = float(base.scenario.field.updraft(pn, pe, h, t))
+        if w_here >= self.lift_threshold and self.climb_useful():
+            return v_slow, self._circle_side(pn, pe, chi, h, t) * 2.0 * math.pi, 0.0
+        return self.cruise()
+
+    def climb_useful(self) -> bool:
+        """Whether gaining height is still worth a circle: below ``ceiling`` of the boundary-layer
+        depth and 150 m under the domain top, and (with a goal) outside the goal region and not
+        already high enough to glide into it at -15 deg."""
+        base: Any = self._require_env().unwrapped
+        sc = base.scenario
+        pn, pe, _, h = (float(v) for v in np.asarray(base.state, dtype=np.float64)[:4])
+        if h >= self.ceiling * sc.field.zi or h >= sc.bounds.height_max - 150.0:
+            return False
+        goal = sc.goal
+        if goal is None:
+            return True
+        dist = math.hypot(goal.north - pn, goal.east - pe)
+        too_high_to_need = h - (goal.height + 0.5 * goal.radius) > 0.27 * max(dist - goal.radius, 0.0)
+        return not too_high_to_need and dist > goal.radius
+
+    def cruise(self) -> tuple[float, float, float]:
+        """The control away from lift: (airspeed [m/s], total turn [rad], path angle [rad]) towards
+        the goal (pure pursuit, the path angle that arrives in the goal's upper half), or the
+        search glide without a goal."""
+        base: Any = self._require_env().unwrapped
         sc = base.scenario
         model = base.model
         lib = model.library
         pn, pe, chi, h = (float(v) for v in np.asarray(base.state, dtype=np.float64)[:4])
-        t = float(getattr(base, "time", 0.0))
-        field = sc.field
         ts = self._step_duration()
         v_slow, v_fast = float(lib.table[:, COL_AIRSPEED].min()), float(lib.table[:, COL_AIRSPEED].max())
-        w_here = float(field.updraft(pn, pe, h, t))
         goal = sc.goal
         if goal is None:
-            if w_here >= self.lift_threshold and h < self.ceiling * field.zi and h < sc.bounds.height_max - 150.0:
-                return v_slow, self._circle_side(pn, pe, chi, h, t) * 2.0 * math.pi, 0.0
-            speeds = np.linspace(float(model.control_low[0]), float(model.control_high[0]), 21)
-            glide = model.aircraft.glide_angle(speeds, 0.0, sc.bounds.height_max)
-            k = int(np.argmax(glide))
-            v = float(speeds[k])
+            v, glide = flattest_glide(model)
             # search within search_radius of the start (where the task's thermals are): beyond it, turn back
             dn, de = sc.start[0] - pn, sc.start[1] - pe
             turn = 0.0
             if math.hypot(dn, de) > self.search_radius:
                 err = _wrap(math.atan2(de, dn) - chi)
                 turn = max(-math.pi, min(math.pi, err))
-            return v, turn, (0.0 if h < 120.0 else float(glide[k]))
+            return v, turn, (0.0 if h < 120.0 else glide)
         dn, de = goal.north - pn, goal.east - pe
         dist = math.hypot(dn, de)
         bearing = math.atan2(de, dn)
         err = _wrap(bearing - chi)
         # Height to aim for at arrival: the upper half of the goal sphere (gliding down costs no fuel).
         h_aim = goal.height + 0.5 * goal.radius
-        too_high_to_need = h - h_aim > 0.27 * max(dist - goal.radius, 0.0)  # can glide in at -15 deg
-        if (
-            w_here >= self.lift_threshold
-            and h < self.ceiling * field.zi
-            and h < sc.bounds.height_max - 150.0
-            and not too_high_to_need
-            and dist > goal.radius
-        ):
-            return v_slow, self._circle_side(pn, pe, chi, h, t) * 2.0 * math.pi, 0.0
         # Head for the goal: climb or descend along the straight line to the aim height.
         run = max(dist - 0.5 * goal.radius, 1.0)
         gamma = math.atan2(h_aim - h, run)
@@ -218,8 +248,7 @@ class HeuristicAgent:
         v = v_fast if gamma < math.radians(5.0) and dist > 4.0 * v_fast * ts else v_slow
         if getattr(base, "has_battery", False) and gamma > 0.0:
             # on a battery: no powered climbs; level at the best-L/D airspeed flies farthest per joule
-            speeds = np.linspace(float(model.control_low[0]), float(model.control_high[0]), 21)
-            v, gamma = float(speeds[int(np.argmax(model.aircraft.glide_angle(speeds, 0.0, sc.bounds.height_max)))]), 0.0
+            v, gamma = flattest_glide(model)[0], 0.0
         # Pure pursuit: the arc tangent to the course through the goal has curvature 2 sin(err) / dist.
         # (over at most LOOKAHEAD: a goal 10 km off the nose would otherwise get no turn at all)
         turn = 2.0 * v * ts * math.sin(err) / min(max(dist, 1.0), LOOKAHEAD)
@@ -279,6 +308,201 @@ class HeuristicAgent:
         if self._env is None:
             raise RuntimeError(f"{type(self).__name__}.predict called before reset(env, seed)")
         return self._env
+
+
+class ThermallingAgent(HeuristicAgent):
+    """A thermalling autopilot on sensed lift alone: a variometer log along its own path, a centroid
+    estimate of the thermal's centre, an orbit about the estimate.
+
+    It knows nothing of the thermal field but what it measured where it flew: at every decision it
+    logs the updraft at each of the last edge's N event points, at the time it passed them (what a
+    netto variometer with GPS records), plus its own position, course and height. It never reads
+    the field elsewhere, nor the observation's thermal slots. Each decision:
+
+    1. **Enter** -- cruising (:meth:`HeuristicAgent.cruise`: towards the goal, or the search glide),
+       when the lift logged along the last edge peaked at ``enter_lift`` or more and a climb is useful
+       (:meth:`HeuristicAgent.climb_useful`), and not within ``tabu_radius`` of a thermal it left
+       less than ``tabu_time`` ago: start circling, towards the side where the last edge's lift grew.
+    2. **Centre** -- the thermal's centre is estimated as the lift-weighted centroid of the points
+       logged in the last ``centre_window`` seconds (the thermal drifts with the wind), weights
+       ``max(w - exit_lift, 0)`` (the centroid estimator of Allen & Lin 2007, "Guidance and
+       control of an autonomous soaring UAV", AIAA 2007-867).
+    3. **Orbit** -- fly towards the point of the circle of ``radius`` about the estimate that lies
+       one step ahead, along the arc tangent to the course through it (total turn: whole circles
+       for long steps, plus twice the bearing error), slow, at the zero-thrust glide angle of that
+       turn (no motor energy in lift).
+    4. **Leave** -- when the mean lift over the last ``exit_window`` seconds is below
+       ``exit_lift``, or a climb stops being useful; the estimate is remembered as tabu.
+
+    Without a goal (the thermal climb) it searches along an Archimedean spiral about the start,
+    ``search_spacing`` metres between turns (out to ``search_radius``, then inwards again), at the
+    flattest zero-thrust glide (level below 120 m) -- an area search instead of one line.
+
+    On the discrete env the nearest allowed primitive is flown (as :class:`HeuristicAgent`).
+
+    :param enter_lift: updraft [m/s] at the aircraft that starts circling.
+    :param exit_lift: mean updraft [m/s] over ``exit_window`` below which it leaves.
+    :param exit_window: seconds of log that decide leaving (at least one step is used).
+    :param centre_window: seconds of log that the centre estimate uses (at least one step).
+    :param radius: orbit radius [m] (at least the tightest turn the envelope allows at that airspeed).
+    :param tabu_radius: distance [m] to a left thermal within which it does not enter again.
+    :param tabu_time: how long [s] a left thermal stays tabu.
+    :param search_spacing: distance [m] between the search spiral's turns.
+    :param ceiling, search_radius: as :class:`HeuristicAgent`.
+    :param name: label in results.
+    """
+
+    def __init__(
+        self,
+        *,
+        search_spacing: float = 150.0,
+        enter_lift: float = 0.5,
+        exit_lift: float = 0.2,
+        exit_window: float = 30.0,
+        centre_window: float = 60.0,
+        radius: float = 45.0,
+        tabu_radius: float = 250.0,
+        tabu_time: float = 300.0,
+        ceiling: float = 0.75,
+        search_radius: float = 1000.0,
+        name: str = "thermalling",
+    ) -> None:
+        super().__init__(lift_threshold=enter_lift, ceiling=ceiling, search_radius=search_radius, name=name)
+        self.enter_lift = float(enter_lift)
+        self.exit_lift = float(exit_lift)
+        self.exit_window = float(exit_window)
+        self.centre_window = float(centre_window)
+        self.radius = float(radius)
+        self.tabu_radius = float(tabu_radius)
+        self.tabu_time = float(tabu_time)
+        self.search_spacing = float(search_spacing)
+        self._reset_memory()
+
+    def _reset_memory(self) -> None:
+        self._log: list[tuple[float, float, float, float]] = []  # (north, east, time, lift) since entering
+        self._circling = False
+        self._side = 1.0
+        self._tabu: list[tuple[float, float, float]] = []  # (north, east, time left)
+        self._logged_steps = -1
+        self._phi = 0.0  # the search spiral's angle [rad] (r = spacing phi / 2 pi)
+
+    def reset(self, env: gym.Env, seed: int | None = None) -> None:
+        """Remember ``env`` and forget the last episode's log (deterministic: ``seed`` is unused)."""
+        super().reset(env, seed)
+        self._reset_memory()
+
+    def _last_edge(self) -> list[tuple[float, float, float, float]]:
+        """(north, east, time, lift) at the last edge's flown points (none before the first step)."""
+        base: Any = self._require_env().unwrapped
+        steps = int(getattr(base, "steps", 0))
+        if steps == 0 or steps == self._logged_steps:
+            return []
+        self._logged_steps = steps
+        lib = base.model.library
+        n = int(lib.n_points)
+        pts = np.asarray(base.path, dtype=np.float64)[-n:]
+        dt = float(lib.duration) / n
+        t_end = float(base.time)
+        field = base.scenario.field
+        times = t_end - dt * np.arange(len(pts) - 1, -1, -1, dtype=np.float64)
+        lift = field.updraft(pts[:, 0], pts[:, 1], pts[:, 3], times)
+        lift = np.atleast_1d(lift)
+        return [(float(p[0]), float(p[1]), float(t), float(w)) for p, t, w in zip(pts, times, lift, strict=True)]
+
+    def centre(self) -> tuple[float, float] | None:
+        """The lift-weighted centroid (north, east) [m] of the recent log, or None."""
+        if not self._log:
+            return None
+        log = np.asarray(self._log, dtype=np.float64)
+        log = log[log[:, 2] >= log[-1, 2] - max(self.centre_window, self._step_duration())]
+        w = np.maximum(log[:, 3] - self.exit_lift, 0.0)
+        if w.sum() <= 0.0:
+            return None
+        return float(w @ log[:, 0] / w.sum()), float(w @ log[:, 1] / w.sum())
+
+    def intent(self) -> tuple[float, float, float]:
+        base: Any = self._require_env().unwrapped
+        model = base.model
+        pn, pe, chi, h = (float(v) for v in np.asarray(base.state, dtype=np.float64)[:4])
+        t = float(base.time)
+        edge = self._last_edge()
+        self._tabu = [(n, e, until) for n, e, until in self._tabu if until > t]
+        if self._circling:
+            self._log.extend(edge)
+            recent = [w for (_, _, tw, w) in self._log if tw >= t - max(self.exit_window, self._step_duration())]
+            if not self.climb_useful() or (recent and float(np.mean(recent)) < self.exit_lift):
+                c = self.centre() or (pn, pe)
+                self._tabu.append((c[0], c[1], t + self.tabu_time))
+                self._circling = False
+                self._log = []
+        elif edge and max(w for *_, w in edge) >= self.enter_lift and self.climb_useful():
+            if all(math.hypot(pn - n, pe - e) > self.tabu_radius for n, e, _ in self._tabu):
+                self._circling = True
+                self._log = list(edge)
+                # turn towards where the lift grew along the last edge: its side of the course
+                k = int(np.argmax([w for *_, w in edge]))
+                dn, de = edge[k][0] - edge[0][0], edge[k][1] - edge[0][1]
+                cross = math.cos(chi) * de - math.sin(chi) * dn  # > 0: the strongest point lies right
+                self._side = 1.0 if cross >= 0.0 else -1.0
+        if not self._circling:
+            return self.cruise()
+        return self._orbit(model, pn, pe, chi, h)
+
+    def cruise(self) -> tuple[float, float, float]:
+        """Towards the goal as :class:`HeuristicAgent`; without one, along the search spiral."""
+        base: Any = self._require_env().unwrapped
+        sc = base.scenario
+        if sc.goal is not None:
+            return super().cruise()
+        model = base.model
+        pn, pe, chi, h = (float(v) for v in np.asarray(base.state, dtype=np.float64)[:4])
+        v, glide = flattest_glide(model)
+        ahead = v * self._step_duration()
+        # the spiral's radius grows out to search_radius, then shrinks again (a triangle wave in phi)
+        period = 2.0 * math.pi * self.search_radius / self.search_spacing
+
+        def point(phi: float) -> tuple[float, float]:
+            m = phi % (2.0 * period)
+            r = self.search_spacing * min(m, 2.0 * period - m) / (2.0 * math.pi)
+            return sc.start[0] + r * math.cos(phi + sc.start[2]), sc.start[1] + r * math.sin(phi + sc.start[2])
+
+        for _ in range(10_000):  # advance the target until it lies one step ahead
+            tn, te = point(self._phi)
+            if math.hypot(tn - pn, te - pe) >= ahead:
+                break
+            self._phi += 0.02
+        turn = max(-math.pi, min(math.pi, 2.0 * _wrap(math.atan2(te - pe, tn - pn) - chi)))
+        return v, turn, (0.0 if h < 120.0 else glide)
+
+    def _orbit(self, model: Any, pn: float, pe: float, chi: float, h: float) -> tuple[float, float, float]:
+        """(airspeed, total turn, path angle) that follows the circle about the centre estimate."""
+        ts = self._step_duration()
+        top = float(model.scenario.bounds.height_max)
+        lo = max(float(model.control_low[0]), float(model.library.table[:, COL_AIRSPEED].min())) + 0.5
+        speeds = np.linspace(lo, max(lo, float(model.control_high[0])), 27)
+        # the tightest circle at each airspeed: bank <= 45 deg and the stall limit, and the envelope's turn rate
+        bank = np.minimum(math.radians(45.0), model.aircraft.max_bank(speeds, top))
+        with np.errstate(divide="ignore"):
+            r_min = np.where(bank > 0.0, speeds**2 / (9.80665 * np.tan(np.maximum(bank, 1e-9))), np.inf)
+        chi_dot_max = float(model.control_high[1])
+        if math.isfinite(chi_dot_max) and chi_dot_max > 0.0:
+            r_min = np.maximum(r_min, speeds / chi_dot_max)
+        fits = np.flatnonzero(r_min <= self.radius)
+        i = int(fits[0]) if fits.size else int(np.argmin(r_min))  # the slowest that fits, else the tightest
+        v = float(speeds[i])
+        r = max(self.radius, float(r_min[i]))
+        c = self.centre() or (pn - self._side * r * math.sin(chi), pe + self._side * r * math.cos(chi))
+        theta = math.atan2(pe - c[1], pn - c[0])  # the aircraft's angle about the centre
+        step_angle = v * ts / r
+        ahead = theta + self._side * (step_angle % (2.0 * math.pi))
+        tn, te = c[0] + r * math.cos(ahead), c[1] + r * math.sin(ahead)
+        arc = 2.0 * _wrap(math.atan2(te - pe, tn - pn) - chi)  # the tangent arc through the target
+        if arc * self._side < 0.0:  # it turns against the circling direction: go round that arc's circle
+            arc += self._side * 2.0 * math.pi
+        turn = self._side * 2.0 * math.pi * math.floor(step_angle / (2.0 * math.pi)) + arc
+        chi_dot = turn / ts
+        gamma = float(model.aircraft.glide_angle(v, chi_dot, top))
+        return v, turn, gamma
 
 
 class ReplayAgent:

@@ -66,8 +66,12 @@ AGENT_NAMES = (
     "ppo-continuous",
     "heuristic",
     "heuristic-continuous",
+    "thermalling",
+    "thermalling-continuous",
     "random",
 )
+#: env settings that change only the reward (a PPO run's are not carried into its evaluation env)
+REWARD_ONLY_KWARGS = ("energy_weight", "goal_bonus", "crash_penalty", "out_of_bounds_penalty", "progress_weight")
 #: PPO agent name -> training algorithm (see :data:`baselines.ppo.ALGOS`).
 PPO_AGENTS = {"ppo-discrete": "discrete", "ppo-masked": "masked", "ppo-continuous": "continuous"}
 
@@ -136,12 +140,19 @@ def check_agent_name(name: str) -> str:
 # --- agents -----------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class AgentSpec:
-    """How to build one agent: its env and a factory. ``settings`` fingerprint it for resuming."""
+    """How to build one agent: its env and a factory. ``settings`` fingerprint it for resuming;
+    ``env_kwargs`` are the agent's own env settings, over the evaluation's (a PPO run's training
+    env: its control interval, envelope, step limit), recorded in ``settings``."""
 
     name: str
     env_id: str
     factory: Callable[[], Any]
     settings: Mapping[str, Any]
+    env_kwargs: Mapping[str, Any] = field(default_factory=dict)
+
+    def env_settings(self, config: EvalConfig) -> dict[str, Any]:
+        """The ``gym.make`` keywords of this agent's env under ``config``."""
+        return {**dict(config.env_kwargs), **dict(self.env_kwargs)}
 
 
 def _file_digest(path: Path) -> str:
@@ -159,6 +170,14 @@ def ppo_model_path(run_dir: str | Path, which: str = "best") -> Path:
     if which == "best" and best.is_file():
         return best
     return d / "model.zip"
+
+
+def ppo_env_kwargs(run_record: Mapping[str, Any]) -> dict[str, Any]:
+    """The env settings a PPO run (its ``config.json``) was trained with, but those that change only
+    the reward (:data:`REWARD_ONLY_KWARGS`): its control interval, envelope, step limit... A policy
+    is scored in the env it learned to fly."""
+    cfg = run_record.get("config", run_record)
+    return {k: v for k, v in dict(cfg.get("env_kwargs", {})).items() if k not in REWARD_ONLY_KWARGS}
 
 
 def agent_spec(name: str, config: EvalConfig) -> AgentSpec:
@@ -207,12 +226,18 @@ def agent_spec(name: str, config: EvalConfig) -> AgentSpec:
 
             return PPOAgent(path, name=name)
 
-        return AgentSpec(name, cfg["env_id"], make_ppo, {"model": str(path), "sha256": _file_digest(path)})
-    from baselines.agents import HeuristicAgent, RandomAgent
+        own = ppo_env_kwargs(cfg)
+        settings = {"model": str(path), "sha256": _file_digest(path)}
+        if own:
+            settings["env_kwargs"] = own
+        return AgentSpec(name, cfg["env_id"], make_ppo, settings, own)
+    from baselines.agents import HeuristicAgent, RandomAgent, ThermallingAgent
 
     if name == "random":
         return AgentSpec(name, DISCRETE_ID, lambda: RandomAgent(use_masks=True, name=name), {"use_masks": True})
-    env_id = CONTINUOUS_ID if name == "heuristic-continuous" else DISCRETE_ID
+    env_id = CONTINUOUS_ID if name.endswith("-continuous") else DISCRETE_ID
+    if name.startswith("thermalling"):
+        return AgentSpec(name, env_id, lambda: ThermallingAgent(name=name), {"rule": "sensed-v1"})
     return AgentSpec(name, env_id, lambda: HeuristicAgent(name=name), {"rule": "v1"})
 
 
@@ -244,6 +269,7 @@ def run_episode(env: gym.Env, agent: Any, scenario: Scenario, seed: int, keep_pa
         ret += float(reward)
     total = plan_s + predict_s
     end = np.asarray(base.state, dtype=np.float64)
+    circling, in_lift = circling_fractions(base)
     path = None
     if keep_path:  # every flown output point (the env keeps them), [north, east, height] to 0.1 m
         path = np.round(np.asarray(base.path, dtype=np.float64)[:, [0, 1, 3]], 1).tolist()
@@ -260,8 +286,34 @@ def run_episode(env: gym.Env, agent: Any, scenario: Scenario, seed: int, keep_pa
         "compute_total_s": total,
         "compute_plan_s": plan_s,
         "compute_per_decision_s": total / max(n, 1),
+        "circling_fraction": circling,
+        "circling_in_lift_fraction": in_lift,
         "path": path,
     }
+
+
+#: A flown interval counts as circling at a course rate of at least this [rad/s] (a full circle
+#: per minute), and as in lift where the updraft at its end is at least ``LIFT_MIN`` [m/s].
+CIRCLING_RATE = 2.0 * math.pi / 60.0
+LIFT_MIN = 0.2
+
+
+def circling_fractions(base: Any) -> tuple[float, float]:
+    """(fraction of the flight time spent circling, fraction spent circling in lift) of the episode
+    an env has just flown, from its flown points (``base.path``: N points per Ts, evenly spaced in
+    time from the start) and the true field at them; (0, 0) before any step."""
+    pts = np.asarray(base.path, dtype=np.float64)
+    if len(pts) < 2:
+        return 0.0, 0.0
+    lib = base.model.library
+    dt = float(lib.duration) / int(lib.n_points)
+    t_end = float(base.time)
+    times = t_end - dt * np.arange(len(pts) - 1, -1, -1, dtype=np.float64)
+    dchi = np.abs((np.diff(pts[:, 2]) + math.pi) % (2.0 * math.pi) - math.pi)
+    turning = dchi / dt >= CIRCLING_RATE
+    lift = np.atleast_1d(base.scenario.field.updraft(pts[1:, 0], pts[1:, 1], pts[1:, 3], times[1:]))
+    n = len(turning)
+    return float(turning.sum() / n), float((turning & (lift >= LIFT_MIN)).sum() / n)
 
 
 def action_set(env_id: str) -> str:
@@ -448,7 +500,7 @@ _CACHE: dict[str, tuple[Any, gym.Env, str]] = {}
 
 
 def _cache_key(spec: AgentSpec, config: EvalConfig) -> str:
-    return json.dumps([spec.name, spec.env_id, _jsonable(spec.settings), _jsonable(config.env_kwargs)])
+    return json.dumps([spec.name, spec.env_id, _jsonable(spec.settings), _jsonable(spec.env_settings(config))])
 
 
 def run_episode_job(job: EpisodeJob) -> dict[str, Any]:
@@ -459,7 +511,7 @@ def run_episode_job(job: EpisodeJob) -> dict[str, Any]:
     seed)``, so the record depends only on the job."""
     if job.cache_key not in _CACHE:
         spec = agent_spec(job.agent, job.config)
-        _CACHE[job.cache_key] = (spec.factory(), make_env(spec.env_id, job.config.env_kwargs), spec.env_id)
+        _CACHE[job.cache_key] = (spec.factory(), make_env(spec.env_id, spec.env_settings(job.config)), spec.env_id)
     agent, env, env_id = _CACHE[job.cache_key]
     rec = run_episode(env, agent, job.scenario_obj, job.seed, job.config.keep_paths)
     return {"agent": job.agent, "scenario": job.scenario, "seed": job.seed, "env_id": env_id, **rec}
@@ -546,9 +598,17 @@ def summarize(results: Mapping[str, Any], reference: str = REFERENCE_AGENT) -> l
                 "regret_n": len(reg),
                 "regret_median": bootstrap_ci(reg, np.median),
                 "regret_mean": bootstrap_ci(reg, np.mean),
+                "circling_in_lift": median_circling(mine),
             }
         )
     return rows
+
+
+def median_circling(episodes: Iterable[Mapping[str, Any]]) -> float:
+    """Median fraction of flight time spent circling in lift (:func:`circling_fractions`) over the
+    episodes that record it (NaN if none: records made before it was measured)."""
+    v = [e["circling_in_lift_fraction"] for e in episodes if e.get("circling_in_lift_fraction") is not None]
+    return float(np.median(v)) if v else math.nan
 
 
 def _f(x: float, fmt: str) -> str:
@@ -569,8 +629,8 @@ def markdown_table(results: Mapping[str, Any], reference: str = REFERENCE_AGENT)
     head = (
         "| agent | success | energy, successes [kJ/kg] | energy on common successes [kJ/kg] "
         f"| × {reference} | regret, median [95 % CI] | regret, mean [95 % CI] | thermal benefit captured (median) "
-        "| flight time [s] | compute / decision [ms] | compute / episode [s] |\n"
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n"
+        "| circling in lift (median) | flight time [s] | compute / decision [ms] | compute / episode [s] |\n"
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n"
     )
     lines = []
     for r in rows:
@@ -580,7 +640,7 @@ def markdown_table(results: Mapping[str, Any], reference: str = REFERENCE_AGENT)
             f"| {_f(r['energy_common'] / 1000, '.2f')} vs {_f(r['energy_common_ref'] / 1000, '.2f')} (n={r['common']}) "
             f"| {_f(r['energy_ratio'], '.2f')} "
             f"| {_ci(r['regret_median'])} | {_ci(r['regret_mean'])} "
-            f"| {_pct(1 - r['regret_median'][0])} "
+            f"| {_pct(1 - r['regret_median'][0])} | {_pct(r['circling_in_lift'])} "
             f"| {_f(r['flight_time_mean'], '.0f')} ± {_f(r['flight_time_std'], '.0f')} "
             f"| {_f(1000 * r['compute_per_decision_s'], '.3g')} | {_f(r['compute_total_s'], '.3g')} |"
         )
@@ -601,8 +661,9 @@ def write_report(results: Mapping[str, Any], out_dir: str | Path, reference: str
         f"episodes; 'common' = (scenario, seed) pairs solved by both the agent and {reference}, "
         "× = ratio of those means. Regret r = (E - E_best) / (E_direct - E_best) per successful episode against "
         "the reference search of its scenario and action set (results/reference/; 0 = best known plan, "
-        "1 = no better than ignoring the thermals); thermal benefit captured = 1 - r. SST knows the thermal "
-        "field; compute time includes SST's planning.\n"
+        "1 = no better than ignoring the thermals); thermal benefit captured = 1 - r. Circling in lift: the fraction "
+        "of the flight time turning at >= 6 deg/s (a circle a minute) where the updraft is >= 0.2 m/s. SST knows the "
+        "thermal field; compute time includes SST's planning.\n"
     )
     files = [out / TABLE_FILE]
     atomic_write_text(files[0], text)

@@ -31,6 +31,7 @@ import math
 import platform
 import sys
 import time
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,7 +52,9 @@ TASKS: dict[str, tuple[str, str, str]] = {
     "climb": ("soaring/ThermalClimb-v0", "soaring/ThermalClimbContinuous-v0", "climb"),
     "xc": ("soaring/CrossCountry-v0", "soaring/CrossCountryContinuous-v0", "xc"),
 }
-VEC_ENVS = ("dummy", "subproc")
+#: ``"native"``: one natively batched env (:class:`~soaring_env.env.sb3.SoaringSB3VecEnv`);
+#: ``"dummy"`` / ``"subproc"``: SB3's vector envs over single ``gym.make`` envs.
+VEC_ENVS = ("native", "dummy", "subproc")
 #: Seeds of the validation scenarios watched during training (test seeds start at 10 000).
 VALIDATION_SEED0 = 5_000
 
@@ -71,7 +74,9 @@ class TrainConfig:
     :param total_timesteps: environment steps (one primitive or control segment each) to train for.
     :param max_minutes: wall-clock cap on training [min]; stops early, saving the model (None: no cap).
     :param n_envs: parallel environments; more give PPO more diverse scenarios per update.
-    :param vec_env: ``"dummy"`` (in-process; fastest for this cheap env) or ``"subproc"``.
+    :param vec_env: ``"native"`` (default: the natively batched env, one rollout call per step for
+        all ``n_envs``), ``"dummy"`` (SB3's in-process loop over single envs) or ``"subproc"``.
+        All three give the same transitions for the same seed.
     :param seed: seeds the policy, the env resets and hence the random training scenarios.
     :param learning_rate: Adam step size; decays linearly to ``lr_final_fraction`` of it.
     :param lr_final_fraction: learning-rate fraction left at the end (1.0: constant).
@@ -98,6 +103,13 @@ class TrainConfig:
         :class:`TurnCurveAction` (``sign(u) |u|^p``) for fine steering; 1 switches it off.
     :param env_kwargs: keyword arguments for ``gym.make`` (config fields of the env); the scenario
         is forced to ``"random"`` for training.
+    :param init_from: start from the policy of an earlier run (its directory or a ``.zip``) with the
+        same observation and action spaces -- a curriculum: e.g. learn to thermal with no goal
+        reward first, then to reach the goal. The value function, the optimizer and the continuous
+        policy's spread (``log_std_init``) start fresh: the earlier values belong to the earlier
+        rewards (a critic that learnt "the goal costs 50" keeps a policy from trying it again), and
+        a policy that had become nearly deterministic (std 0.02) would not explore the new task.
+        None (default): fresh weights.
     :param eval_freq: evaluate every this many total timesteps.
     :param n_eval_scenarios: validation scenarios per evaluation (one episode each).
     :param checkpoint_freq: save a checkpoint every this many total timesteps (0: never).
@@ -111,7 +123,7 @@ class TrainConfig:
     total_timesteps: int = 1_000_000
     max_minutes: float | None = None
     n_envs: int = 8
-    vec_env: str = "dummy"
+    vec_env: str = "native"
     seed: int = 0
     learning_rate: float = 3e-4
     lr_final_fraction: float = 0.1
@@ -130,6 +142,7 @@ class TrainConfig:
     body_frame: bool | None = None
     turn_exponent: float = 3.0
     env_kwargs: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    init_from: str | None = None
     eval_freq: int = 25_000
     n_eval_scenarios: int = 40
     checkpoint_freq: int = 500_000
@@ -146,6 +159,8 @@ class TrainConfig:
             object.__setattr__(self, "body_frame", True)
         if self.vec_env not in VEC_ENVS:
             raise ValueError(f"vec_env={self.vec_env!r} is unknown; known: {', '.join(VEC_ENVS)}")
+        if self.vec_env == "native" and self.shaping:
+            raise ValueError("shaping needs vec_env='dummy' or 'subproc' (GoalDistanceShaping wraps single envs)")
         for name in ("total_timesteps", "n_envs", "n_steps", "batch_size", "n_epochs", "n_eval_scenarios"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name}={getattr(self, name)!r} must be >= 1")
@@ -159,6 +174,8 @@ class TrainConfig:
         if self.ent_coef is None:
             object.__setattr__(self, "ent_coef", 0.01 if self.algo == "continuous" else 0.03)
         object.__setattr__(self, "env_kwargs", dict(self.env_kwargs))
+        if self.init_from is not None:
+            _init_model_path(str(self.init_from))
         if "scenario" in self.env_kwargs:
             raise ValueError("env_kwargs must not set 'scenario': training always draws random scenarios")
 
@@ -339,8 +356,17 @@ def turn_curve(action: Any, exponent: float) -> np.ndarray:
     full envelope (tight thermalling spirals) stays reachable at |u| = 1.
     """
     a = np.array(action, dtype=np.float32, copy=True)
-    u = a[..., 1]
-    a[..., 1] = np.sign(u) * np.abs(u) ** exponent
+    u = np.abs(a[..., 1].astype(np.float64))
+    p = float(exponent)
+    if p.is_integer() and 1 <= p <= 8:
+        # repeated products round the same in numpy's SIMD loops and its scalar path (float32
+        # powers do not), so one env and a batch of envs fly the same controls bit for bit
+        m = u.copy()
+        for _ in range(int(p) - 1):
+            m *= u
+    else:
+        m = u**p
+    a[..., 1] = np.sign(a[..., 1]) * m.astype(np.float32)
     return a
 
 
@@ -412,6 +438,55 @@ def _wrap_policy_io(env: gym.Env, body_frame: bool, turn_exponent: float) -> gym
     if turn_exponent != 1.0 and isinstance(env.action_space, gym.spaces.Box):
         env = TurnCurveAction(env, turn_exponent)
     return env
+
+
+def make_native_train_env(
+    env_id: str,
+    n_envs: int,
+    env_kwargs: Mapping[str, Any] | None = None,
+    body_frame: bool = True,
+    turn_exponent: float = 1.0,
+) -> Any:
+    """``n_envs`` training envs as one natively batched SB3 ``VecEnv`` (random scenario at every
+    reset), with SB3's ``VecMonitor`` episode statistics and the same body-frame observations and
+    turn curve as :func:`make_train_env` -- the same transitions as SB3's ``DummyVecEnv`` over it."""
+    from stable_baselines3.common.vec_env import VecEnvWrapper, VecMonitor
+
+    from soaring_env.env.sb3 import SoaringSB3VecEnv
+
+    venv: Any = SoaringSB3VecEnv(n_envs, env_id=env_id, scenario="random", **dict(env_kwargs or {}))
+    obs_fn = BodyFrame(venv.venv.template.observation_names) if body_frame else None
+    act_fn = None
+    if turn_exponent != 1.0 and isinstance(venv.action_space, gym.spaces.Box):
+        p = float(turn_exponent)
+
+        def act_fn(a: np.ndarray) -> np.ndarray:
+            return turn_curve(np.clip(a, -1.0, 1.0), p)
+
+    class PolicyIO(VecEnvWrapper):  # type: ignore[misc]
+        """Batched :class:`BodyFrameObservation` / :class:`TurnCurveAction`."""
+
+        def __init__(self, inner: Any) -> None:
+            space = inner.observation_space
+            super().__init__(inner, observation_space=space if obs_fn is None else obs_fn.space(space))
+
+        def reset(self) -> np.ndarray:
+            obs: Any = self.venv.reset()
+            return obs if obs_fn is None else obs_fn(obs)
+
+        def step_async(self, actions: np.ndarray) -> None:
+            self.venv.step_async(actions if act_fn is None else act_fn(actions))
+
+        def step_wait(self) -> Any:
+            obs, reward, done, infos = self.venv.step_wait()
+            if obs_fn is not None:
+                obs = obs_fn(obs)
+                for info in infos:
+                    if "terminal_observation" in info:
+                        info["terminal_observation"] = obs_fn(info["terminal_observation"])
+            return obs, reward, done, infos
+
+    return VecMonitor(PolicyIO(venv), info_keywords=("is_success",))
 
 
 def make_eval_env(
@@ -578,6 +653,34 @@ def _probe(config: TrainConfig) -> Any:
     return gym.make(_module_qualified(config.env_id), **dict(config.env_kwargs)).unwrapped
 
 
+def _init_policy_from(model: Any, init_from: str, log_std_init: float) -> None:
+    """Load ``init_from``'s weights into ``model``, then re-initialise the value function (SB3's
+    orthogonal initialisation and gains), the Gaussian policy's log std and the optimizer."""
+    import torch
+
+    try:
+        model.set_parameters(str(_init_model_path(init_from)), exact_match=True, device="cpu")
+    except (RuntimeError, ValueError) as e:  # torch's size mismatch: other spaces or layers
+        raise ValueError(f"init_from={init_from!r} does not fit this run's spaces and layers: {e}") from e
+    pol = model.policy
+    torch.manual_seed(model.seed if model.seed is not None else 0)  # the fresh critic is seeded too
+    pol.mlp_extractor.value_net.apply(lambda m: pol.init_weights(m, gain=math.sqrt(2.0)))
+    pol.init_weights(pol.value_net, gain=1.0)
+    if hasattr(pol, "log_std"):
+        with torch.no_grad():
+            pol.log_std.fill_(log_std_init)
+    pol.optimizer = pol.optimizer_class(pol.parameters(), lr=model.lr_schedule(1.0), **pol.optimizer_kwargs)
+
+
+def _init_model_path(init_from: str) -> Path:
+    """The ``.zip`` of ``init_from`` (a run directory's ``model.zip``, or the file itself)."""
+    p = Path(init_from)
+    z = p / "model.zip" if p.is_dir() else p
+    if not z.is_file():
+        raise ValueError(f"init_from={init_from!r}: no model at {z}")
+    return z
+
+
 def train(config: TrainConfig, out_dir: str | Path) -> Path:
     """Train ``config`` and write the run directory ``out_dir`` (see the module docstring).
 
@@ -604,21 +707,27 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
     }
     atomic_write_text(out / "config.json", json.dumps(record, indent=2))
 
-    vec_cls = SubprocVecEnv if config.vec_env == "subproc" else DummyVecEnv
-    train_env = make_vec_env(
-        make_train_env,
-        n_envs=config.n_envs,
-        seed=config.seed,
-        vec_env_cls=vec_cls,
-        env_kwargs={
-            "env_id": config.env_id,
-            "env_kwargs": config.env_kwargs,
-            "shaping": config.shaping,
-            "gamma": config.gamma,
-            "body_frame": bool(config.body_frame),
-            "turn_exponent": config.turn_exponent,
-        },
-    )
+    train_env: Any
+    if config.vec_env == "native":
+        train_env = make_native_train_env(
+            config.env_id, config.n_envs, config.env_kwargs, bool(config.body_frame), config.turn_exponent
+        )
+        train_env.seed(config.seed)  # as make_vec_env seeds: env i resets with seed + i
+    else:
+        train_env = make_vec_env(
+            make_train_env,
+            n_envs=config.n_envs,
+            seed=config.seed,
+            vec_env_cls=SubprocVecEnv if config.vec_env == "subproc" else DummyVecEnv,
+            env_kwargs={
+                "env_id": config.env_id,
+                "env_kwargs": config.env_kwargs,
+                "shaping": config.shaping,
+                "gamma": config.gamma,
+                "body_frame": bool(config.body_frame),
+                "turn_exponent": config.turn_exponent,
+            },
+        )
     scenarios = validation_scenarios(config.n_eval_scenarios, random_scenario_kwargs(config.env_kwargs), config.family)
     eval_env = DummyVecEnv(
         [
@@ -653,7 +762,11 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
         device="cpu",
         verbose=max(config.verbose, 0),
     )
+    if config.init_from is not None:
+        _init_policy_from(model, config.init_from, config.log_std_init)
     t_start = time.perf_counter()
+    # the native training env and the validation env are different VecEnv classes, by design
+    warnings.filterwarnings("ignore", message="Training and eval env are not of the same type")
     eval_cb = _eval_callback(config, eval_env, out, t_start, 1)
     callbacks: list[Any] = [eval_cb]
     if config.checkpoint_freq:

@@ -26,8 +26,8 @@ import gymnasium as gym
 import numpy as np
 
 from baselines._runs import read_json
-from baselines.agents import HeuristicAgent, PPOAgent, RandomAgent, ReplayAgent
-from baselines.evaluation import bootstrap_ci, run_episode
+from baselines.agents import HeuristicAgent, PPOAgent, RandomAgent, ReplayAgent, ThermallingAgent
+from baselines.evaluation import bootstrap_ci, median_circling, ppo_env_kwargs, run_episode
 from baselines.reference.beam import ReferenceConfig, search
 from baselines.reference.horizon import HorizonConfig, energy_search
 from soaring_env._validation import ConfigError, check_choice
@@ -40,7 +40,7 @@ TASK_FAMILIES = {
     "soaring/CrossCountry-v0": "xc",
     "soaring/CrossCountryContinuous-v0": "xc",
 }
-AGENTS = ("reference", "heuristic", "direct", "random")
+AGENTS = ("reference", "heuristic", "thermalling", "direct", "random")
 #: The label of a trained PPO run's rows (``task_jobs(ppo_runs=...)``).
 PPO = "ppo"
 #: The scenario whose flown paths the results keep (the trajectories figure's), per family.
@@ -57,6 +57,9 @@ XC_PROGRESS_WEIGHT = 0.5
 XC_START_WIDTH = 125
 #: Bumped when the tasks' reference settings change (records of another version are redone).
 REFERENCE_VERSION = 2
+#: Bumped when the agents' episode records gain fields (2: circling fractions) or an agent's rule
+#: changes: their records of another version are redone (the reference's cost minutes; they are not).
+RECORD_VERSION = 2
 
 
 @dataclass(frozen=True)
@@ -80,8 +83,9 @@ class TaskJob:
             return {"beam_width": self.beam_width, "reference_version": REFERENCE_VERSION}
         if self.agent == PPO:
             model = Path(self.run) / "model.zip"
-            return {"run": self.run, "model_mtime": model.stat().st_mtime if model.exists() else None}
-        return {}
+            mtime = model.stat().st_mtime if model.exists() else None
+            return {"run": self.run, "model_mtime": mtime, "record_version": RECORD_VERSION}
+        return {"record_version": RECORD_VERSION}
 
 
 def task_jobs(
@@ -156,7 +160,8 @@ def reference_plan(env: gym.Env, beam_width: int) -> tuple[list[Any], dict[str, 
 
 def run_task_job(job: TaskJob) -> dict[str, Any]:
     """One episode record (see the module docstring); module level, so it runs in worker processes."""
-    env = gym.make(job.env_id)
+    own = ppo_env_kwargs(read_json(Path(job.run) / "config.json", "PPO run configuration")) if job.agent == PPO else {}
+    env = gym.make(job.env_id, **own)
     sc = get_scenario(job.scenario)
     base: Any = env.unwrapped
     ref_stats: dict[str, Any] | None = None
@@ -170,6 +175,8 @@ def run_task_job(job: TaskJob) -> dict[str, Any]:
         agent = ReplayAgent(actions, name="reference")
     elif job.agent == "heuristic":
         agent = HeuristicAgent()
+    elif job.agent == "thermalling":
+        agent = ThermallingAgent()
     elif job.agent == "direct":
         agent = HeuristicAgent(lift_threshold=math.inf, name="direct")  # never circles
     elif job.agent == PPO:
@@ -186,6 +193,8 @@ def run_task_job(job: TaskJob) -> dict[str, Any]:
         rec["battery_left"] = max(float(base.battery_left), 0.0) / float(base.battery)  # the last edge may overdraw
     if ref_stats is not None:
         rec["reference"] = ref_stats
+        # the plan itself (a later rescoring replays it instead of searching again)
+        rec["actions"] = [a.tolist() if isinstance(a, np.ndarray) else int(a) for a in actions]
         if ref_stats["predicted_energy"] != rec["energy_gained"]:
             raise RuntimeError(
                 f"{job.key()}: the reference plan predicted {ref_stats['predicted_energy']!r} J/kg, "
@@ -235,6 +244,7 @@ def summarize(episodes: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
                     "energy_gained_median": bootstrap_ci(gained, np.median),
                     "fraction_of_reference_median": bootstrap_ci(frac, np.median),
                     "battery_left_median": statistics.median(battery) if battery else math.nan,
+                    "circling_in_lift": median_circling(flown),
                     "outcomes": outcomes,
                 }
             )
@@ -255,8 +265,8 @@ def markdown_table(rows: Sequence[Mapping[str, Any]]) -> str:
 
     lines = [
         "| task id | agent | episodes | success | energy gained, median [95 % CI] [kJ/kg] "
-        "| of the reference's (median [95 % CI]) | battery left (median) | outcomes |",
-        "|---|---|---|---|---|---|---|---|",
+        "| of the reference's (median [95 % CI]) | battery left (median) | circling in lift (median) | outcomes |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         xc = TASK_FAMILIES[r["env_id"]] == "xc"
@@ -269,7 +279,8 @@ def markdown_table(rows: Sequence[Mapping[str, Any]]) -> str:
             f"| `{r['env_id'].split('/')[1]}` | {r['agent']} | {r['episodes']} | {succ} | "
             f"{num(r['energy_gained_median'], '.2f', scale=1e-3)} | "
             f"{'—' if xc else num(r['fraction_of_reference_median'], '.0f', ' %', 100.0)} | "
-            f"{num(r['battery_left_median'], '.0f', ' %', 100.0) if xc else '—'} | {outcomes} |"
+            f"{num(r['battery_left_median'], '.0f', ' %', 100.0) if xc else '—'} | "
+            f"{num(r['circling_in_lift'], '.0f', ' %', 100.0)} | {outcomes} |"
         )
     return "\n".join(lines) + "\n"
 

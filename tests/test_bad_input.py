@@ -300,7 +300,7 @@ def test_env_config_fields(name: str, value: Any) -> None:
 def test_path_history_is_bounded(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(env_core, "MAX_PATH_EDGES", 5)
     big = Bounds(north_min=-1e6, north_max=1e6, east_min=-1e6, east_max=1e6, height_max=1500.0)
-    env = env_core.SoaringEnv(scenario=paper_scenario().replace(bounds=big))  # raw env: no time limit
+    env = env_core.SoaringEnv(scenario=paper_scenario().replace(bounds=big), max_steps=None)  # endless episodes
     env.reset(seed=0)
     for _ in range(50):
         _, _, terminated, _, _ = env.step(97)  # 10 m/s level circle: flies forever

@@ -59,7 +59,7 @@ def test_registration_is_idempotent_and_complete() -> None:
         register_envs()
     for env_id in IDS:
         spec = gym.spec(env_id)
-        assert spec.max_episode_steps == MAX_EPISODE_STEPS
+        assert spec.max_episode_steps is None  # the env owns its step limit (max_steps)
         assert spec.vector_entry_point is not None
     assert isinstance(gym.make(ENV_ID).action_space, gym.spaces.Discrete)
     assert gym.make(ENV_ID).action_space.n == 174
@@ -319,6 +319,32 @@ def test_truncation_only_by_the_time_limit() -> None:
         assert not terminated
         assert truncated == (i == MAX_EPISODE_STEPS - 1)
     assert info["time"] == MAX_EPISODE_STEPS * 30.0
+    with pytest.raises(RuntimeError, match="reset"):  # after truncation, as after termination
+        env.step(spiral_level_10)
+    env.reset(seed=0)
+    env.step(spiral_level_10)
+
+
+@pytest.mark.parametrize("env_id", [ENV_ID, CONTINUOUS_ENV_ID])
+@pytest.mark.parametrize("limit", [1, 3, None])
+def test_max_steps_is_the_envs_own_limit(env_id: str, limit: int | None) -> None:
+    """``gym.make(id, max_steps=N)`` truncates at N in the single env and the native vector env;
+    ``None`` never truncates; bad values are named errors."""
+    action = 70 + 2 * 5 + 2 if env_id == ENV_ID else np.zeros(3, np.float32)  # a level spiral; straight
+    env = gym.make(env_id, max_steps=limit, scenario=Scenario(start=(0.0, -2000.0, 0.0, 1000.0)))
+    env.reset(seed=0)
+    n = 5 if limit is None else limit
+    for i in range(n):
+        _, _, terminated, truncated, _ = env.step(action)
+        assert not terminated and truncated == (limit is not None and i == limit - 1)
+    venv = gym.make_vec(env_id, num_envs=2, max_steps=limit, scenario=Scenario(start=(0.0, -2000.0, 0.0, 1000.0)))
+    venv.reset(seed=0)
+    for i in range(n):
+        _, _, terminated, truncated, _ = venv.step(np.stack([action, action]))
+        assert not terminated.any() and truncated.tolist() == [limit is not None and i == limit - 1] * 2
+    for bad in (0, -1, 2.5, "40", True):
+        with pytest.raises(ConfigError, match="max_steps"):
+            gym.make(env_id, max_steps=bad)
 
 
 # --- scenarios, options and configuration -------------------------------------------------------------
@@ -535,3 +561,17 @@ def test_rollouts_are_batch_invariant_near_thermals(seed: int) -> None:
     for i in range(0, b, 5):
         one = m.rollout_primitive(x[i], int(p[i]), t0=30.0, airspeed_prev=10.0)
         assert np.array_equal(one.states[0], batch.states[i]) and one.cost[0] == batch.cost[i]
+
+
+def test_energy_weight_scales_only_the_energy_reward() -> None:
+    """``energy_weight`` multiplies the energy term; the flight and its J/kg bookkeeping are unchanged."""
+    a, b = gym.make(ENV_ID, energy_weight=1.0), gym.make(ENV_ID, energy_weight=3.0)
+    a.reset(seed=0)
+    b.reset(seed=0)
+    for action in (7, 57, 120):
+        ra, rb = a.step(action), b.step(action)
+        assert np.array_equal(ra[0], rb[0]) and ra[4]["energy_spent"] == rb[4]["energy_spent"]
+        assert rb[4]["reward_terms"]["energy"] == pytest.approx(3.0 * ra[4]["reward_terms"]["energy"])
+        assert rb[4]["reward_terms"]["progress"] == ra[4]["reward_terms"]["progress"]
+    with pytest.raises(ConfigError, match="energy_weight"):
+        gym.make(ENV_ID, energy_weight=-1.0)

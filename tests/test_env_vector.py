@@ -234,3 +234,20 @@ def test_sb3_subproc_vec_env_with_spawn() -> None:
         assert "energy_spent" in info[0]
     finally:
         venv.close()
+
+
+def test_sb3_adapter_takes_every_registered_id() -> None:
+    from soaring_env.env import ENV_IDS
+    from soaring_env.env.sb3 import SoaringSB3VecEnv
+
+    for env_id in ENV_IDS:
+        venv = SoaringSB3VecEnv(2, env_id=env_id)
+        assert venv.observation_space == gym.make(env_id).observation_space
+        obs = venv.reset()
+        assert obs.shape == (2, *venv.observation_space.shape)
+    xc = SoaringSB3VecEnv(2, env_id="soaring/CrossCountry-v0")
+    xc.reset()
+    _, _, _, infos = xc.step(np.array([0, 0]))
+    assert "battery_left" in infos[0]
+    with pytest.raises(ConfigError, match="env_id"):
+        SoaringSB3VecEnv(2, env_id="CartPole-v1")

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import soaring_env  # noqa: F401  (registers the envs)
-from baselines.agents import Agent, HeuristicAgent, RandomAgent, SSTPlannerAgent, action_mask_of
+from baselines.agents import Agent, HeuristicAgent, RandomAgent, SSTPlannerAgent, ThermallingAgent, action_mask_of
 from baselines.evaluation import (
     AGENT_NAMES,
     CONTINUOUS_ID,
@@ -21,6 +21,7 @@ from baselines.evaluation import (
     agent_spec,
     check_agent_name,
     check_scenario_name,
+    circling_fractions,
     heldout_names,
     load_results,
     markdown_table,
@@ -137,6 +138,75 @@ def test_heuristic_circles_in_lift() -> None:
     assert abs(turn) >= 2 * np.pi - 1e-9 and gamma == 0.0
     action, _ = agent.predict(None)
     assert "spiral" in env.unwrapped.model.library.describe(int(action))
+
+
+def _climb_on_a_thermal(offset: float = 40.0) -> tuple[gym.Env, Any]:
+    """The thermal-climb env on a scenario with one strong thermal ``offset`` m north of the start."""
+    from soaring_env.physics import Thermal, WindField
+    from soaring_env.scenario import Bounds, Scenario
+
+    field = WindField(thermals=(Thermal(north=offset, east=0.0, strength=3.0),), model="allen", zi=1400.0)
+    sc = Scenario(
+        name="one-thermal",
+        field=field,
+        start=(0.0, 0.0, 0.0, 400.0),
+        goal=None,
+        bounds=Bounds(-3000.0, 3000.0, -3000.0, 3000.0, 1500.0),
+    )
+    env = gym.make("soaring/ThermalClimbContinuous-v0", scenario=sc)
+    env.reset(seed=0)
+    return env, sc
+
+
+def test_thermalling_agent_senses_lift_only_where_it_flew() -> None:
+    """It reads the field only at flown points at the times it passed them, finds the thermal's
+    centre by the lift-weighted centroid, circles there and climbs."""
+    env, sc = _climb_on_a_thermal()
+    base: Any = env.unwrapped
+    queried: list[tuple[float, float, float]] = []
+    real = type(sc.field).updraft
+
+    def spy(self: Any, n: Any, e: Any, h: Any, t: Any) -> Any:
+        pts = zip(np.atleast_1d(n).tolist(), np.atleast_1d(e).tolist(), np.atleast_1d(h).tolist(), strict=True)
+        queried.extend(pts)
+        return real(self, n, e, h, t)
+
+    agent = ThermallingAgent()
+    agent.reset(env, 0)
+    obs = None
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(type(sc.field), "updraft", spy)
+        for _ in range(40):
+            n0 = len(queried)
+            action, _ = agent.predict(obs)
+            flown = {tuple(np.round(p[[0, 1, 3]], 9)) for p in np.asarray(base.path)}
+            assert all(tuple(np.round(q, 9)) in flown for q in queried[n0:])  # only points it flew through
+            obs, *_ = env.step(action)
+    centre = agent.centre()
+    assert centre is not None and np.hypot(centre[0] - 40.0, centre[1]) < 25.0
+    assert base.state[3] > 400.0  # it climbed
+    circling, in_lift = circling_fractions(base)
+    assert circling > 0.8 and in_lift > 0.8
+
+
+def test_circling_fractions_closed_forms() -> None:
+    """A level spiral all episode is all circling; a straight glide none; lift needs an updraft."""
+    env, _ = _climb_on_a_thermal(offset=2000.0)  # the thermal is far away: no lift here
+    base: Any = env.unwrapped
+    straight = base.model.control_to_action(np.array([15.0, 0.0, 0.0])).astype(np.float32)
+    for _ in range(6):
+        env.step(straight)
+    assert circling_fractions(base) == (0.0, 0.0)
+    env.reset(seed=0)
+    turn = base.model.control_to_action(np.array([15.0, 0.3, 0.0])).astype(np.float32)  # 17 deg/s
+    for _ in range(6):
+        env.step(turn)
+    assert circling_fractions(base) == (1.0, 0.0)
+    env2, _ = _climb_on_a_thermal(offset=0.0)
+    b2: Any = env2.unwrapped
+    for _ in range(6):
+        env2.step(b2.model.control_to_action(np.array([13.0, 0.3, 0.0])).astype(np.float32))  # 43 m circles
+    assert circling_fractions(b2) == (1.0, 1.0)
 
 
 # --- runs -----------------------------------------------------------------------------------------------

@@ -192,3 +192,82 @@ def test_body_frame_of_any_layout() -> None:
     assert t[names.index("thermal_0_east")] == pytest.approx(-n * s + e * c, abs=1e-6)  # right
     with pytest.raises(ValueError, match="task"):
         TrainConfig(task="soar")
+
+
+@pytest.mark.parametrize(
+    ("env_id", "exponent"),
+    [
+        ("soaring/SoaringContinuous-v0", 3.0),
+        ("soaring/Soaring-v0", 1.0),
+        ("soaring/ThermalClimbContinuous-v0", 1.0),
+        ("soaring/CrossCountry-v0", 1.0),
+    ],
+)
+def test_native_training_env_equals_sb3_dummy_vec_env(env_id: str, exponent: float) -> None:
+    """The natively batched training env (the default ``vec_env``) gives SB3's DummyVecEnv's
+    transitions bit for bit: body-frame observations, turn curve, terminal observations, episode
+    statistics, for goal reaching and the tasks."""
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from baselines.ppo import make_native_train_env, make_train_env
+
+    n = 3
+    native = make_native_train_env(env_id, n, {}, True, exponent)
+    dummy = make_vec_env(
+        make_train_env,
+        n_envs=n,
+        seed=3,
+        vec_env_cls=DummyVecEnv,
+        env_kwargs={"env_id": env_id, "body_frame": True, "turn_exponent": exponent},
+    )
+    native.seed(3)
+    dummy.seed(3)
+    assert native.observation_space == dummy.observation_space
+    assert np.array_equal(native.reset(), dummy.reset())
+    rng = np.random.default_rng(0)
+    episodes = 0
+    for _ in range(150):
+        space = native.action_space
+        if isinstance(space, gym.spaces.Discrete):
+            a = rng.integers(0, space.n, n)
+        else:
+            a = rng.uniform(-1.0, 1.0, (n, *space.shape)).astype(np.float32)
+        r1, r2 = native.step(a), dummy.step(a)
+        for x, y in zip(r1[:3], r2[:3], strict=True):
+            assert np.array_equal(x, y)
+        for i1, i2 in zip(r1[3], r2[3], strict=True):
+            for key in ("terminal_observation", "is_success", "TimeLimit.truncated", "episode"):
+                assert (key in i1) == (key in i2), key
+            if "terminal_observation" in i1:
+                assert np.array_equal(i1["terminal_observation"], i2["terminal_observation"])
+            if "episode" in i1:
+                episodes += 1
+                assert i1["episode"]["l"] == i2["episode"]["l"]
+                assert i1["episode"]["r"] == pytest.approx(i2["episode"]["r"], abs=1e-5)
+    assert episodes > 0
+
+
+def test_native_vec_env_is_the_default_and_refuses_shaping() -> None:
+    assert TrainConfig().vec_env == "native"
+    with pytest.raises(ValueError, match="shaping"):
+        TrainConfig(shaping=1.0)
+    TrainConfig(shaping=1.0, vec_env="dummy")
+
+
+def test_turn_curve_is_the_same_for_one_action_and_a_batch() -> None:
+    rng = np.random.default_rng(0)
+    batch = rng.uniform(-1.0, 1.0, (4096, 3)).astype(np.float32)
+    for p in (3.0, 2.5):
+        assert np.array_equal(turn_curve(batch, p), np.stack([turn_curve(a, p) for a in batch]))
+
+
+def test_init_from_continues_an_earlier_run(trained: dict[str, Path], tmp_path: Path) -> None:
+    """A curriculum stage starts from an earlier run's weights; a missing or unfitting run is refused."""
+    with pytest.raises(ValueError, match="init_from"):
+        TrainConfig(init_from=str(tmp_path / "nowhere"))
+    cfg = dataclasses.replace(_tiny("continuous"), total_timesteps=256, init_from=str(trained["continuous"]))
+    run = train(cfg, tmp_path / "stage2")
+    assert json.loads((run / "config.json").read_text())["config"]["init_from"] == str(trained["continuous"])
+    with pytest.raises(ValueError, match="does not fit"):
+        train(dataclasses.replace(_tiny("discrete"), init_from=str(trained["continuous"])), tmp_path / "bad")

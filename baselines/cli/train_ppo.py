@@ -32,7 +32,7 @@ from typing import Any
 
 from baselines._runs import add_backend_args, check_cli_args, cli_workers
 from baselines.backends import run_jobs
-from baselines.ppo import ALGOS, TASKS, TrainConfig, plot_learning_curve, train
+from baselines.ppo import ALGOS, TASKS, VEC_ENVS, TrainConfig, plot_learning_curve, train
 from soaring_env._validation import ConfigError
 
 #: Wall-clock shares of ``--minutes`` for ``--algo all`` (masked PPO steps ~4x slower: the masks
@@ -95,7 +95,9 @@ def main(argv: list[str] | None = None) -> int:
         help="wall-clock cap [min]: per variant, or in total for --algo all (split masked 40 %%, others 30 %%)",
     )
     p.add_argument("--n-envs", type=int, default=None, help="parallel envs (default 8)")
-    p.add_argument("--vec-env", choices=["dummy", "subproc"], default=None, help="vectorization (default dummy)")
+    p.add_argument(
+        "--vec-env", choices=list(VEC_ENVS), default=None, help="vectorization (default native: one batched env)"
+    )
     p.add_argument("--seed", type=int, default=None, help="the seed (default 0); results in <out>/<algo>/")
     p.add_argument(
         "--seeds", nargs="+", type=int, default=None, help="several seeds, trained in parallel: <out>/seed-<s>/<algo>/"
@@ -106,6 +108,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--eval-freq", type=int, default=None, help="evaluate every this many timesteps")
     p.add_argument("--eval-scenarios", type=int, default=None, help="validation scenarios per evaluation")
     p.add_argument("--checkpoint-freq", type=int, default=None, help="checkpoint every this many timesteps")
+    p.add_argument(
+        "--init-from", default=None, metavar="RUN", help="start from an earlier run's weights (a curriculum stage)"
+    )
     p.add_argument("--set", action="append", default=[], metavar="FIELD=JSON", help="any other TrainConfig field")
     add_backend_args(p, "one per seed, at most one per CPU core")
     args = p.parse_args(argv)
@@ -137,6 +142,7 @@ def main(argv: list[str] | None = None) -> int:
         ("eval_freq", args.eval_freq),
         ("n_eval_scenarios", args.eval_scenarios),
         ("checkpoint_freq", args.checkpoint_freq),
+        ("init_from", args.init_from),
     ):
         if val is not None:
             overrides[name] = val

@@ -5,8 +5,9 @@ Registered at ``import soaring_env``:
 * ``soaring/Soaring-v0`` -- :class:`SoaringEnv`, ``Discrete(174)`` motion primitives;
 * ``soaring/SoaringContinuous-v0`` -- :class:`SoaringContinuousEnv`, ``Box(-1, 1, (3,))`` controls;
 
-both with ``max_episode_steps=40`` (40 x 30 s = 20 min); and the tasks of :mod:`soaring_env.env.tasks`,
-which truncate by their own ``time_limit``:
+both truncated by the env itself after ``max_steps=40`` steps (40 x 30 s = 20 min); and the tasks of
+:mod:`soaring_env.env.tasks`, which truncate by their own ``time_limit``. No id registers
+``max_episode_steps``: the env owns its limit, so a ``step()`` after truncation raises.
 
 * ``soaring/ThermalClimb-v0``, ``soaring/ThermalClimbContinuous-v0`` -- gain energy in 600 s;
 * ``soaring/CrossCountry-v0``, ``soaring/CrossCountryContinuous-v0`` -- a goal 8-15 km away on a
@@ -20,7 +21,7 @@ from __future__ import annotations
 
 import gymnasium as gym
 
-from soaring_env.env.config import ENERGY_SCALE, SoaringEnvConfig
+from soaring_env.env.config import ENERGY_SCALE, MAX_EPISODE_STEPS, SoaringEnvConfig
 from soaring_env.env.core import SoaringBaseEnv, SoaringContinuousEnv, SoaringEnv
 from soaring_env.env.tasks import (
     TASK_ENVS,
@@ -37,8 +38,6 @@ from soaring_env.env.vector import SoaringContinuousVectorEnv, SoaringVectorEnv
 
 ENV_ID = "soaring/Soaring-v0"
 CONTINUOUS_ENV_ID = "soaring/SoaringContinuous-v0"
-#: 40 steps of Ts = 30 s: 20 minutes of flight.
-MAX_EPISODE_STEPS = 40
 
 
 def register_envs() -> None:
@@ -57,11 +56,10 @@ def register_envs() -> None:
                 id=env_id,
                 entry_point=entry,
                 vector_entry_point=vector_entry,
-                max_episode_steps=MAX_EPISODE_STEPS,
-            )
+            )  # truncated by the env's own max_steps (MAX_EPISODE_STEPS)
     for suffix, (single, vector) in TASK_ENVS.items():
         env_id = f"soaring/{suffix}"
-        if env_id not in gym.registry:  # the tasks truncate by their own time_limit
+        if env_id not in gym.registry:
             gym.register(
                 id=env_id,
                 entry_point=f"{single.__module__}:{single.__name__}",

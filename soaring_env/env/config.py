@@ -45,6 +45,10 @@ ENERGY_SCALE = 1000.0
 ScenarioSpec = str | os.PathLike[str] | Scenario | Mapping[str, Any]
 #: Longest observation history [edges].
 MAX_HISTORY = 64
+#: the goal-reaching step limit: 40 steps of Ts = 30 s, 20 minutes of flight
+MAX_EPISODE_STEPS = 40
+#: the largest ``max_steps``
+MAX_STEPS = 10_000_000
 
 
 @dataclass(frozen=True)
@@ -76,6 +80,10 @@ class SoaringEnvConfig:
     :param goal_bonus: reward added when the goal region is reached [kJ/kg-equivalent]. The energy
         rewards of an episode sum to ``-(fuel + kinetic) + g (h_end - h_start)``, so height kept at
         the end pays; the bonus must beat ending high instead of at the goal (g x 1.3 km = 12.7).
+    :param energy_weight: weight of the energy term (``-energy_weight x cost / 1 kJ/kg``; default 1).
+        Among the policies that reach the goal the least energy still scores best at any weight;
+        a larger weight makes the energy a thermal saves a larger part of the return (a training
+        aid: ``info["energy_spent"]`` and every score stay in J/kg).
     :param crash_penalty: reward subtracted on ground contact (the height lost on the way down is
         already charged as potential energy; the penalty makes a crash worse than any flight).
     :param out_of_bounds_penalty: reward subtracted on leaving the flight domain.
@@ -93,8 +101,14 @@ class SoaringEnvConfig:
         course change); 0 (default) adds none.
     :param sensor_noise: standard deviation [m/s] of Gaussian noise on the sensed lift entries
         (``updraft``, ``edge_lift``, the history's lift), drawn from the episode's seed; 0: exact.
-    :param time_limit: flight time [s] after which an episode is truncated by the env itself, or
-        ``None`` (default: the registered ``max_episode_steps`` truncates); at least one step (Ts).
+    :param time_limit: flight time [s] after which an episode is truncated, or ``None`` (default:
+        no time limit; ``max_steps`` still applies); at least one step (Ts). Adds ``time_left`` to
+        the observation.
+    :param max_steps: the env truncates after this many steps (default 40: 20 min of 30 s steps;
+        ``None``: never), as gymnasium's ``TimeLimit`` would, and a ``step()`` after that raises
+        until ``reset()``. The env owns its limit so that it knows an episode was truncated:
+        change it with ``gym.make(id, max_steps=N)`` (``gym.make``'s own ``max_episode_steps``
+        adds a ``TimeLimit`` outside the env, which can only shorten episodes).
     """
 
     #: the random-scenario generator of ``"random"`` mode and ``random_scenario`` (a task's own)
@@ -115,6 +129,7 @@ class SoaringEnvConfig:
     speed_scale: float = 20.0
     wind_scale: float = 10.0
     goal_bonus: float = 25.0
+    energy_weight: float = 1.0
     crash_penalty: float = 25.0
     out_of_bounds_penalty: float = 25.0
     progress_weight: float = 1.0
@@ -125,6 +140,7 @@ class SoaringEnvConfig:
     history_length: int = 0
     sensor_noise: float = 0.0
     time_limit: float | None = None
+    max_steps: int | None = MAX_EPISODE_STEPS
 
     def __post_init__(self) -> None:
         if isinstance(self.scenario, os.PathLike):
@@ -148,6 +164,7 @@ class SoaringEnvConfig:
         check_int("n_obs_thermals", self.n_obs_thermals, 0, 64)
         for name in ("position_scale", "height_scale", "updraft_scale", "speed_scale", "wind_scale"):
             object.__setattr__(self, name, check_positive(name, getattr(self, name)))
+        object.__setattr__(self, "energy_weight", check_range("energy_weight", self.energy_weight, 0.0, 1000.0))
         for name in ("goal_bonus", "crash_penalty", "out_of_bounds_penalty", "progress_weight"):
             object.__setattr__(self, name, check_finite(name, getattr(self, name)))
         if isinstance(self.render_size, (str, bytes)) or not hasattr(self.render_size, "__iter__"):
@@ -165,6 +182,8 @@ class SoaringEnvConfig:
         if self.time_limit is not None:
             tl = check_range("time_limit", self.time_limit, self.duration, 1e7)
             object.__setattr__(self, "time_limit", tl)
+        if self.max_steps is not None:
+            object.__setattr__(self, "max_steps", check_int("max_steps", self.max_steps, 1, MAX_STEPS))
         # Fail early on an unknown name, a bad file or pinned scenario, or bad random-scenario keywords.
         resolve_scenario(self.scenario, self.random_scenario, self.generator)
 

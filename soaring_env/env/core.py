@@ -124,8 +124,9 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
     Reward units are kJ/kg of specific energy. Each step gives the sum of these terms, each also
     reported in ``info["reward_terms"]``:
 
-    - ``energy``: ``-edge_cost / 1000``, the negative net specific energy spent on the edge
-      (motor energy + potential energy lost + kinetic energy added). Positive in strong lift.
+    - ``energy``: ``-energy_weight * edge_cost / 1000`` (weight 1 by default), the negative net
+      specific energy spent on the edge (motor energy + potential energy lost + kinetic energy
+      added). Positive in strong lift.
     - ``progress``: ``progress_weight * (d_before - d_after) / 1 km`` with d the 3-D distance to
       the goal centre (potential-based shaping; default weight 1; 0 turns it off).
     - ``goal``: ``+goal_bonus`` (default 25) on reaching the goal region.
@@ -155,8 +156,9 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
     2. at or below the ground (h <= 0) -- terminated (crash);
     3. outside the flight domain (horizontal bounds or the ceiling) -- terminated.
 
-    The new state is that event point (else the edge's end). Truncation happens only through the
-    registered ``max_episode_steps`` (40 steps = 20 min of flight).
+    The new state is that event point (else the edge's end). The env truncates the episode itself
+    after ``max_steps`` steps (default 40 = 20 min of flight; ``gym.make(id, max_steps=N)``), or
+    at ``time_limit`` if one is set; a ``step()`` after that raises until ``reset()``.
 
     ## Information
 
@@ -243,6 +245,7 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         self._goal_on = int(self.has_goal)
         self._noise_sigma = float(cfg.sensor_noise)
         self._time_limit = math.inf if cfg.time_limit is None else float(cfg.time_limit)
+        self._max_steps = math.inf if cfg.max_steps is None else int(cfg.max_steps)
         self.observation_names: list[str] = names
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
         self._n_obs = len(names)
@@ -255,6 +258,7 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         self._ts = float(self.library.duration)
         self._dt = self.library.duration / self.library.n_points
         self._w_progress = float(cfg.progress_weight)
+        self._w_energy = float(cfg.energy_weight)
         # Terminal reward terms indexed by the outcome code (FLYING, GOAL, CRASH, OUT_OF_BOUNDS, BATTERY_EMPTY).
         self._terminal = {
             name: np.array([value if code == c else 0.0 for c in range(len(OUTCOMES))])
@@ -361,10 +365,10 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
     def reward_terms(self, cost, d_prev, d_new, code) -> dict[str, Any]:
         """The reward terms of an edge -- floats for one edge, arrays for a batch (the vector env).
 
-        ``energy = -cost / 1000`` (cost in J/kg), ``progress = w (d_prev - d_new) / 1000`` (goal
+        ``energy = -energy_weight cost / 1000`` (cost in J/kg), ``progress = w (d_prev - d_new) / 1000`` (goal
         distances in m), and the terminal terms of the outcome ``code``; the reward is their sum.
         """
-        terms = {"energy": -cost / ENERGY_SCALE}
+        terms = {"energy": -self._w_energy * cost / ENERGY_SCALE}
         if self.has_goal:
             terms["progress"] = self._w_progress * (d_prev - d_new) / PROGRESS_SCALE
         for key, by_code in self._terminal.items():
@@ -563,7 +567,8 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         reward = sum(reward_terms.values())
         self._d_goal = d_new
         terminated = code != FLYING
-        truncated = not terminated and t_new >= self._time_limit - 1e-9
+        # the step limit truncates as gymnasium's TimeLimit does (also on the terminating step)
+        truncated = self.steps >= self._max_steps or (not terminated and t_new >= self._time_limit - 1e-9)
         self._needs_reset = terminated or truncated
         h = float(new_state[0, 3])
         self._path.append(out[0, : k + 1])

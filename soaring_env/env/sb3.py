@@ -4,14 +4,16 @@ SB3 does not accept gymnasium's ``VectorEnv``; :class:`SoaringSB3VecEnv` adapts
 :class:`~soaring_env.env.vector.SoaringVectorEnv` to SB3's conventions: same-step autoreset,
 ``info["terminal_observation"]`` (the last observation of a finished episode, before the reset),
 ``info["TimeLimit.truncated"]`` (every step: truncated and not terminated), float32 rewards, bool dones.
-Transitions equal those of ``DummyVecEnv([lambda: gym.make(id)] * n)`` seeded alike.
+Transitions equal those of ``DummyVecEnv([lambda: gym.make(id)] * n)`` seeded alike, for every
+registered id (``env_id``: goal reaching, thermal climb, cross-country).
 
 Example::
 
     from sb3_contrib import MaskablePPO
     from soaring_env.env.sb3 import SoaringSB3VecEnv
-    venv = SoaringSB3VecEnv(num_envs=16)
+    venv = SoaringSB3VecEnv(num_envs=16)  # soaring/Soaring-v0
     model = MaskablePPO("MlpPolicy", venv).learn(100_000)
+    climb = SoaringSB3VecEnv(num_envs=16, env_id="soaring/ThermalClimbContinuous-v0")
 """
 
 from __future__ import annotations
@@ -30,6 +32,28 @@ from soaring_env.env.vector import SoaringContinuousVectorEnv, SoaringVectorEnv
 
 #: per-env info keys passed on to SB3 (kept short: building B dicts per step is the adapter's cost)
 INFO_KEYS = ("energy_spent", "height", "outcome", "is_success")
+#: the same, for tasks with a battery (cross-country)
+BATTERY_INFO_KEYS = (*INFO_KEYS, "battery_left")
+
+
+def vector_env_class(env_id: str) -> type[SoaringVectorEnv] | type[SoaringContinuousVectorEnv]:
+    """The natively batched class registered as ``env_id``'s ``vector_entry_point``.
+
+    :raises ConfigError: ``env_id`` is not a registered soaring id.
+    """
+    from gymnasium.envs.registration import load_env_creator
+
+    import soaring_env  # noqa: F401  (registers the ids)
+
+    bare = env_id.split(":", 1)[-1]
+    spec = gym.registry.get(bare)
+    entry = None if spec is None else spec.vector_entry_point
+    cls = load_env_creator(entry) if isinstance(entry, str) else entry
+    if not (isinstance(cls, type) and issubclass(cls, (SoaringVectorEnv, SoaringContinuousVectorEnv))):
+        from soaring_env.env import ENV_IDS
+
+        raise ConfigError(f"env_id={env_id!r} is not a soaring env id; allowed: {', '.join(ENV_IDS)}")
+    return cls
 
 
 class SoaringSB3VecEnv(VecEnv):
@@ -37,9 +61,11 @@ class SoaringSB3VecEnv(VecEnv):
 
     :param num_envs: number of envs.
     :param continuous: ``soaring/SoaringContinuous-v0`` dynamics (Box actions) instead of the
-        174 primitives.
-    :param max_episode_steps: truncation limit (the registered ids use 40).
-    :param config: :class:`~soaring_env.env.config.SoaringEnvConfig` (or dict) shared by all envs.
+        174 primitives (ignored when ``env_id`` is given).
+    :param max_episode_steps: step limit; ``"default"``: the id's (40 for goal reaching, none for
+        the tasks, which truncate by their ``time_limit``).
+    :param config: the id's config (or dict) shared by all envs.
+    :param env_id: any registered soaring id (default: from ``continuous``).
     :param overrides: single config fields.
     """
 
@@ -47,11 +73,15 @@ class SoaringSB3VecEnv(VecEnv):
         self,
         num_envs: int = 1,
         continuous: bool = False,
-        max_episode_steps: int | None = 40,
+        max_episode_steps: int | str | None = "default",
         config: SoaringEnvConfig | dict[str, Any] | None = None,
+        env_id: str | None = None,
         **overrides: Any,
     ) -> None:
-        cls = SoaringContinuousVectorEnv if continuous else SoaringVectorEnv
+        if env_id is None:
+            cls: Any = SoaringContinuousVectorEnv if continuous else SoaringVectorEnv
+        else:
+            cls = vector_env_class(env_id)
         self.venv: Any = cls(
             num_envs=num_envs,
             max_episode_steps=max_episode_steps,
@@ -61,6 +91,7 @@ class SoaringSB3VecEnv(VecEnv):
         )
         super().__init__(num_envs, self.venv.single_observation_space, self.venv.single_action_space)
         self._actions: np.ndarray | None = None
+        self._info_keys = BATTERY_INFO_KEYS if self.venv.template.has_battery else INFO_KEYS
 
     # --- the VecEnv protocol -------------------------------------------------------------------------
     def reset(self) -> np.ndarray:
@@ -85,8 +116,9 @@ class SoaringSB3VecEnv(VecEnv):
         self._actions = None
         dones = terminated | truncated
         n = self.num_envs
-        keys = (*INFO_KEYS, "TimeLimit.truncated")
-        cols = [info[k].tolist() for k in INFO_KEYS]
+        info_keys = self._info_keys
+        keys = (*info_keys, "TimeLimit.truncated")
+        cols = [info[k].tolist() for k in info_keys]
         cols.append((truncated & ~terminated).tolist())
         infos: list[dict[str, Any]] = [dict(zip(keys, row, strict=True)) for row in zip(*cols, strict=True)]
         if dones.any():
@@ -94,7 +126,7 @@ class SoaringSB3VecEnv(VecEnv):
             final = info["final_info"]
             for i in np.flatnonzero(dones).tolist():
                 d = infos[i]
-                for k in INFO_KEYS:
+                for k in info_keys:
                     d[k] = final[k][i].item() if isinstance(final[k][i], np.generic) else final[k][i]
                 d["terminal_observation"] = final_obs[i]
         assert len(infos) == n

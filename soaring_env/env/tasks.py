@@ -49,6 +49,7 @@ class ThermalClimbConfig(SoaringEnvConfig):
     aircraft: Aircraft = dataclasses.field(default_factory=_tempest_with_stall_limit)
     progress_weight: float = 0.0
     time_limit: float | None = 600.0
+    max_steps: int | None = None  # truncated by time_limit
 
 
 @dataclass(frozen=True)
@@ -86,6 +87,7 @@ class CrossCountryConfig(SoaringEnvConfig):
     aircraft: Aircraft = dataclasses.field(default_factory=_tempest_with_stall_limit)
     position_scale: float = 2000.0
     time_limit: float | None = 3600.0
+    max_steps: int | None = None  # truncated by time_limit
     battery_fraction: float = 0.25
     battery_penalty: float = 25.0
 
@@ -256,29 +258,25 @@ class CrossCountryContinuousEnv(_CrossCountry, SoaringContinuousEnv):
     config_class: ClassVar[type[SoaringEnvConfig]] = CrossCountryContinuousConfig
 
 
-class _TaskVector:
-    default_max_episode_steps: ClassVar[int | None] = None  # the tasks truncate by time_limit
-
-
-class ThermalClimbVectorEnv(_TaskVector, SoaringVectorEnv):
+class ThermalClimbVectorEnv(SoaringVectorEnv):
     """Natively batched :class:`ThermalClimbEnv` (see :class:`~soaring_env.env.vector.SoaringVectorEnv`)."""
 
     single_env_class: ClassVar[type[SoaringBaseEnv]] = ThermalClimbEnv
 
 
-class ThermalClimbContinuousVectorEnv(_TaskVector, SoaringContinuousVectorEnv):
+class ThermalClimbContinuousVectorEnv(SoaringContinuousVectorEnv):
     """Natively batched :class:`ThermalClimbContinuousEnv`."""
 
     single_env_class: ClassVar[type[SoaringBaseEnv]] = ThermalClimbContinuousEnv
 
 
-class CrossCountryVectorEnv(_TaskVector, SoaringVectorEnv):
+class CrossCountryVectorEnv(SoaringVectorEnv):
     """Natively batched :class:`CrossCountryEnv`."""
 
     single_env_class: ClassVar[type[SoaringBaseEnv]] = CrossCountryEnv
 
 
-class CrossCountryContinuousVectorEnv(_TaskVector, SoaringContinuousVectorEnv):
+class CrossCountryContinuousVectorEnv(SoaringContinuousVectorEnv):
     """Natively batched :class:`CrossCountryContinuousEnv`."""
 
     single_env_class: ClassVar[type[SoaringBaseEnv]] = CrossCountryContinuousEnv

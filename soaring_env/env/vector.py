@@ -16,8 +16,8 @@ Autoreset: ``AutoresetMode.NEXT_STEP`` by default, as gymnasium's ``SyncVectorEn
 after an episode ends resets that env, ignores its action and returns reward 0,
 terminated = truncated = False and the reset info); ``autoreset_mode=AutoresetMode.SAME_STEP``
 resets in the same step and puts the last observation and info into ``info["final_obs"]`` and
-``info["final_info"]``. Truncation: after ``max_episode_steps`` steps (the registered 40), as
-``TimeLimit`` does for a single env.
+``info["final_info"]``. Truncation: after ``max_episode_steps`` steps (default: the config's
+``max_steps``, 40 for goal reaching), as the single env does, and at the config's ``time_limit``.
 
 One kernel call rolls out every env's edge, each in its own scenario's thermal field (the kernel
 reads a per-env table of fields), so ``"random"`` scenarios cost no more than a shared one.
@@ -80,7 +80,8 @@ class _SoaringVectorBase(VectorEnv):
     are gymnasium's batched dicts (``info[key]`` arrays with ``info["_" + key]`` masks).
 
     :param num_envs: number of envs B.
-    :param max_episode_steps: truncate after this many steps (None: never).
+    :param max_episode_steps: truncate after this many steps (None: never; ``"default"``: the
+        config's ``max_steps``).
     :param render_mode: must be None (render single envs instead).
     :param config: a :class:`~soaring_env.env.config.SoaringEnvConfig` (or dict), shared by all envs.
     :param autoreset_mode: ``NEXT_STEP`` (default) or ``SAME_STEP``.
@@ -92,8 +93,6 @@ class _SoaringVectorBase(VectorEnv):
 
     metadata: dict[str, Any] = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}  # noqa: RUF012
     single_env_class: ClassVar[type[SoaringBaseEnv]] = SoaringEnv
-    #: the registered step limit of the goal-reaching ids (the tasks truncate by their time_limit)
-    default_max_episode_steps: ClassVar[int | None] = 40
 
     def __init__(
         self,
@@ -111,8 +110,10 @@ class _SoaringVectorBase(VectorEnv):
                 f"render_mode={render_mode!r}: the native vector env does not render; allowed: None "
                 "(use vectorization_mode='sync' or a single env to render)"
             )
+        #: a single env that holds the shared configuration, spaces and library
+        self.template = tmpl = self.single_env_class(config, **overrides)
         if max_episode_steps == "default":
-            max_episode_steps = self.default_max_episode_steps
+            max_episode_steps = tmpl.config.max_steps
         if max_episode_steps is not None and (
             isinstance(max_episode_steps, (bool, str))
             or not isinstance(max_episode_steps, (int, np.integer))
@@ -129,8 +130,6 @@ class _SoaringVectorBase(VectorEnv):
             raise ConfigError(f"autoreset_mode={mode!r} is not supported; allowed: NEXT_STEP, SAME_STEP")
         self.autoreset_mode = mode
         self.metadata = {**type(self).metadata, "autoreset_mode": mode}
-        #: a single env that holds the shared configuration, spaces and library
-        self.template = tmpl = self.single_env_class(config, **overrides)
         self.config = tmpl.config
         self.num_envs = int(num_envs)
         self.max_episode_steps = max_episode_steps
