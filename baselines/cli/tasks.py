@@ -148,7 +148,14 @@ def _figure(episodes: list[dict[str, Any]], path: Path) -> None:
     fig, axes = plt.subplots(rows, cols, figsize=(6.0 * cols, 5.6 * rows), squeeze=False)
     for ax in axes.ravel()[len(ids) :]:
         ax.set_visible(False)
-    colours = {"reference": "#1a8f3a", "heuristic": "#1f3b73", "direct": "#d35400", "random": "0.5", "ppo": "#8e44ad"}
+    colours = {
+        "reference": "#1a8f3a",
+        "heuristic": "#1f3b73",
+        "thermalling": "#17a2b8",
+        "direct": "#d35400",
+        "random": "0.5",
+        "ppo": "#8e44ad",
+    }
     for ax, env_id in zip(axes.ravel(), ids, strict=False):
         first = FIGURE_SCENARIO[TASK_FAMILIES[env_id]]
         sc = get_scenario(first)
@@ -163,7 +170,7 @@ def _figure(episodes: list[dict[str, Any]], path: Path) -> None:
                 continue
             pts = path_array(ep)
             label = f"{ep['agent']}: {ep['energy_gained'] / 1e3:+.1f} kJ/kg, {ep['outcome']}"
-            ax.plot(pts[:, 1] / 1e3, pts[:, 0] / 1e3, color=colours[ep["agent"]], lw=1.2, label=label)
+            ax.plot(pts[:, 1] / 1e3, pts[:, 0] / 1e3, color=colours.get(ep["agent"], "k"), lw=1.2, label=label)
         ax.plot(sc.start[1] / 1e3, sc.start[0] / 1e3, "ko", ms=5)
         ax.set_aspect("equal")
         ax.set_title(f"{env_id.split('/')[1]}: {first}", fontsize=9)
