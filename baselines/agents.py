@@ -29,7 +29,7 @@ from typing import Any, Protocol, cast, runtime_checkable
 import gymnasium as gym
 import numpy as np
 
-from soaring_env._validation import ConfigError
+from soaring_env._validation import ConfigError, check_finite, check_positive, check_range
 from soaring_env.primitives import COL_AIRSPEED, COL_CHI_DOT_1, COL_CHI_DOT_2, COL_FAMILY, COL_GAMMA, SPIRAL
 
 __all__ = [
@@ -176,10 +176,11 @@ class HeuristicAgent:
         name: str = "heuristic",
     ) -> None:
         self.name = name
-        self.search_radius = search_radius
-        self.lift_threshold = lift_threshold
-        self.ceiling = ceiling
-        self.probe = probe
+        self.search_radius = check_positive("search_radius", search_radius)
+        # inf: never circle (the "direct" flyer)
+        self.lift_threshold = math.inf if lift_threshold == math.inf else check_finite("lift_threshold", lift_threshold)
+        self.ceiling = check_range("ceiling", ceiling, 0.0, 1.0, low_open=True)
+        self.probe = check_positive("probe", probe)
         self._env: gym.Env | None = None
 
     def reset(self, env: gym.Env, seed: int | None = None) -> None:
@@ -368,14 +369,14 @@ class ThermallingAgent(HeuristicAgent):
         name: str = "thermalling",
     ) -> None:
         super().__init__(lift_threshold=enter_lift, ceiling=ceiling, search_radius=search_radius, name=name)
-        self.enter_lift = float(enter_lift)
-        self.exit_lift = float(exit_lift)
-        self.exit_window = float(exit_window)
-        self.centre_window = float(centre_window)
-        self.radius = float(radius)
-        self.tabu_radius = float(tabu_radius)
-        self.tabu_time = float(tabu_time)
-        self.search_spacing = float(search_spacing)
+        self.enter_lift = check_finite("enter_lift", enter_lift)
+        self.exit_lift = check_range("exit_lift", exit_lift, -math.inf, self.enter_lift)
+        self.exit_window = check_positive("exit_window", exit_window)
+        self.centre_window = check_positive("centre_window", centre_window)
+        self.radius = check_positive("radius", radius)
+        self.tabu_radius = check_range("tabu_radius", tabu_radius, 0.0, 1e6)
+        self.tabu_time = check_range("tabu_time", tabu_time, 0.0, 1e7)
+        self.search_spacing = check_range("search_spacing", search_spacing, 1.0, 1e5)
         self._reset_memory()
 
     def _reset_memory(self) -> None:

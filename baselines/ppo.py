@@ -175,7 +175,10 @@ class TrainConfig:
             object.__setattr__(self, "ent_coef", 0.01 if self.algo == "continuous" else 0.03)
         object.__setattr__(self, "env_kwargs", dict(self.env_kwargs))
         if self.init_from is not None:
-            _init_model_path(str(self.init_from))
+            if not isinstance(self.init_from, (str, Path)):
+                raise ValueError(f"init_from={self.init_from!r} must be a run directory or .zip path (a string)")
+            object.__setattr__(self, "init_from", str(self.init_from))
+            _init_model_path(self.init_from)
         if "scenario" in self.env_kwargs:
             raise ValueError("env_kwargs must not set 'scenario': training always draws random scenarios")
 

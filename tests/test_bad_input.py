@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -373,3 +374,42 @@ def test_random_action_fuzz_million_steps() -> None:
             total += envs.num_envs
         envs.close()
     assert total >= 1_000_000
+
+
+# --- agents and adapters of the agents issue -------------------------------------------------------
+@pytest.mark.parametrize(
+    ("kw", "match"),
+    [
+        ({"radius": "x"}, "radius"),
+        ({"radius": float("nan")}, "radius"),
+        ({"radius": -5.0}, "radius"),
+        ({"enter_lift": float("inf")}, "enter_lift"),
+        ({"exit_lift": 2.0}, "exit_lift"),  # above enter_lift
+        ({"exit_window": 0.0}, "exit_window"),
+        ({"search_spacing": 0.0}, "search_spacing"),
+        ({"tabu_time": True}, "tabu_time"),
+        ({"ceiling": 1.5}, "ceiling"),
+    ],
+)  # fmt: skip
+def test_thermalling_agent_arguments(kw: dict[str, Any], match: str) -> None:
+    from baselines.agents import HeuristicAgent, ThermallingAgent
+
+    with pytest.raises(ConfigError, match=match):
+        ThermallingAgent(**kw)
+    with pytest.raises(ConfigError, match="lift_threshold"):
+        HeuristicAgent(lift_threshold="0.8")  # type: ignore[arg-type]
+    HeuristicAgent(lift_threshold=math.inf)  # the direct flyer
+
+
+def test_sb3_adapter_and_init_from_arguments(tmp_path: Path) -> None:
+    pytest.importorskip("stable_baselines3")
+    from baselines.ppo import TrainConfig
+    from soaring_env.env.sb3 import SoaringSB3VecEnv
+
+    for bad in (3, None.__class__, "soaring/Nope-v0"):
+        with pytest.raises(ConfigError, match="env_id"):
+            SoaringSB3VecEnv(2, env_id=bad)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="init_from"):
+        TrainConfig(init_from=5)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="init_from"):
+        TrainConfig(init_from=str(tmp_path))

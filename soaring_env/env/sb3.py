@@ -45,6 +45,8 @@ def vector_env_class(env_id: str) -> type[SoaringVectorEnv] | type[SoaringContin
 
     import soaring_env  # noqa: F401  (registers the ids)
 
+    if not isinstance(env_id, str):
+        raise ConfigError(f"env_id={env_id!r} has type {type(env_id).__name__}; a registered soaring id is required")
     bare = env_id.split(":", 1)[-1]
     spec = gym.registry.get(bare)
     entry = None if spec is None else spec.vector_entry_point
