@@ -23,6 +23,7 @@ import numpy as np
 from numba import njit
 
 from soaring_env._jit import FASTMATH as _FM
+from soaring_env._threads import SERIAL, RowThreads
 from soaring_env._validation import (
     ConfigError,
     as_float_array,
@@ -488,17 +489,26 @@ class Propagator:
         thermals: np.ndarray,
         n_thermals: np.ndarray,
         params: np.ndarray,
+        threads: RowThreads = SERIAL,
     ) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`run` with row b in field ``field_index[b]`` (int64, (B,); empty: field 0 for all) of a
         packed table of F fields: ``thermals`` (F, n_max, PACKED_COLUMNS) rows of :attr:`WindField.packed` (the
         first ``n_thermals[f]`` used), ``params`` (F, 6) rows of :func:`field_params`. No validation:
-        every index must be < F. The aircraft, library and substep are this propagator's."""
+        every index must be < F. The aircraft, library and substep are this propagator's.
+        ``threads`` splits the rows over worker threads (same result bit for bit)."""
         b = x0.shape[0]
         out = np.empty((b, self.n_points, 4))
         terms = np.empty((b, 6))
-        _rollout_kernel(
-            x0, t0, ctrl, v_prev, field_index, *self._pre, thermals, n_thermals, params, self._ac, out, terms
-        )
+        per_row = field_index.size > 0
+
+        def block(r: slice) -> None:
+            fidx = field_index[r] if per_row else field_index
+            _rollout_kernel(
+                x0[r], t0[r], ctrl[r], v_prev[r], fidx, *self._pre, thermals, n_thermals, params, self._ac,
+                out[r], terms[r],
+            )  # fmt: skip
+
+        threads.run(b, block)
         return out, terms
 
 
@@ -587,7 +597,7 @@ def _advance(n, e, c, s, u, om, tau, cd, sd, wn, we):
     return n2, e2, c2, s2
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, nogil=True)
 def _rollout_kernel(
     x0, t0, ctrl, v_prev, fidx, dur, n_pts, k_switch, max_substep, th_all, nth_all, fpar, ac, out, terms
 ):

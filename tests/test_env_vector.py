@@ -8,10 +8,13 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.vector import AutoresetMode
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import soaring_env  # noqa: F401  (registers the ids)
 from soaring_env import ConfigError
-from soaring_env.env import CONTINUOUS_ENV_ID, ENV_ID
+from soaring_env._threads import MIN_ROWS_PER_THREAD, RowThreads
+from soaring_env.env import CONTINUOUS_ENV_ID, ENV_ID, ENV_IDS
 from soaring_env.env.vector import SoaringContinuousVectorEnv, SoaringVectorEnv
 from soaring_env.primitives import N_PRIMITIVES
 
@@ -251,3 +254,65 @@ def test_sb3_adapter_takes_every_registered_id() -> None:
     assert "battery_left" in infos[0]
     with pytest.raises(ConfigError, match="env_id"):
         SoaringSB3VecEnv(2, env_id="CartPole-v1")
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_threads_give_the_same_steps_bit_for_bit(env_id: str) -> None:
+    """num_threads splits each step's rows over worker threads: same transitions as one thread."""
+    n = 3 * MIN_ROWS_PER_THREAD + 5  # uneven blocks, enough rows for three threads
+    kwargs = {"scenario": "random"} if env_id in IDS else {"history_length": 3, "sensor_noise": 0.2}
+    envs = [gym.make_vec(env_id, num_envs=n, num_threads=k, **kwargs) for k in (1, 2, 3)]
+    assert [e.num_threads for e in envs] == [1, 2, 3]
+    first = [e.reset(seed=3) for e in envs]
+    for o, i in first[1:]:
+        assert np.array_equal(first[0][0], o)
+        _assert_same_infos(first[0][1], i)
+    rng = np.random.default_rng(1)
+    for _ in range(12):
+        a = _actions(envs[0].single_action_space, rng, n)
+        steps = [e.step(a) for e in envs]
+        for s in steps[1:]:
+            for x, y in zip(steps[0][:4], s[:4], strict=True):
+                assert np.array_equal(x, y)
+            _assert_same_infos(steps[0][4], s[4])
+    if isinstance(envs[0], SoaringVectorEnv):
+        masks = [e.action_masks() for e in envs]
+        assert all(np.array_equal(masks[0], m) for m in masks[1:])
+    for e in envs:
+        e.close()
+
+
+@pytest.mark.parametrize("bad", [0, -2, 1.5, "2", True, None])
+def test_bad_thread_counts_are_explained(bad: object) -> None:
+    with pytest.raises(ConfigError, match="num_threads"):
+        SoaringVectorEnv(num_envs=2, num_threads=bad)
+
+
+@settings(max_examples=60, deadline=None)
+@given(n_rows=st.integers(0, 700), threads=st.integers(1, 6))
+def test_row_threads_cover_every_row_once(n_rows: int, threads: int) -> None:
+    seen = np.zeros(n_rows, dtype=np.int64)
+    blocks: list[slice] = []
+    pool = RowThreads(threads)
+
+    def call(r: slice) -> None:
+        blocks.append(r)
+        seen[r] += 1
+
+    pool.run(n_rows, call)
+    pool.close()
+    assert np.all(seen == 1)
+    assert len(blocks) == max(1, min(threads, n_rows // MIN_ROWS_PER_THREAD))
+
+
+def test_row_threads_raise_a_block_error_in_the_caller() -> None:
+    pool = RowThreads(2)
+
+    def call(r: slice) -> None:
+        if r.start > 0:
+            raise RuntimeError("worker block failed")
+
+    with pytest.raises(RuntimeError, match="worker block failed"):
+        pool.run(4 * MIN_ROWS_PER_THREAD, call)
+    pool.close()
+    pool.run(10, lambda r: None)  # closed: runs in the calling thread

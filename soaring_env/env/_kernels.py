@@ -16,7 +16,7 @@ from soaring_env.env.observation import goal_distance, observe_row
 from soaring_env.model import CRASH, FLYING, GOAL, OUT_OF_BOUNDS, classify_batch, classify_row
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def post_step(
     out: np.ndarray,
     x0: np.ndarray,
