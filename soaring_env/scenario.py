@@ -464,8 +464,10 @@ class RandomScenarioSpec:
     Every range is an ordered pair ``(low, high)`` of finite numbers: ``n_thermals`` integers in
     [0, ``MAX_RANDOM_THERMALS``], ``strength`` (w* or Gaussian peak) in (0, 20] m/s, ``wind_speed``
     in [0, 50] m/s, ``goal_distance`` [m] above the goal radius (150 m) and within the domain,
-    ``height`` [m] inside (0, ``bounds.height_max``]; ``zi`` [m] > 0. A bad one raises a
-    :class:`ConfigError` naming it. ``bounds=None`` is :func:`default_random_bounds`.
+    ``height`` [m] inside (0, ``bounds.height_max``]; ``zi`` [m] > 0; ``lateral_spread`` in [0, 1]:
+    thermals lie up to this fraction of the goal distance to either side of the start-goal line
+    (0.3, the default; 0 puts them on it -- a curriculum in which flying straight meets the lift).
+    A bad one raises a :class:`ConfigError` naming it. ``bounds=None`` is :func:`default_random_bounds`.
     """
 
     n_thermals: tuple[int, int] = (1, 5)
@@ -478,8 +480,10 @@ class RandomScenarioSpec:
     drift: bool = False
     bounds: Bounds | None = None
     name: str = "random"
+    lateral_spread: float = 0.3
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "lateral_spread", check_range("lateral_spread", self.lateral_spread, 0.0, 1.0))
         bounds = default_random_bounds() if self.bounds is None else self.bounds
         check_type("bounds", bounds, Bounds)
         object.__setattr__(self, "bounds", bounds)
@@ -533,6 +537,7 @@ def make_scenario(
     drift: bool = False,
     bounds: Bounds | None = None,
     name: str = "random",
+    lateral_spread: float = 0.3,
     lifecycle: tuple[float, float] | None = None,
     rise_time: float = 120.0,
     birth_window: tuple[float, float] = (0.0, 0.0),
@@ -580,6 +585,7 @@ def make_scenario(
         drift=drift,
         bounds=bounds,
         name=name,
+        lateral_spread=lateral_spread,
     )
     time_kw = _check_time_options(lifecycle, rise_time, birth_window, strength_variation, variation_period)
     bounds = spec.domain
@@ -603,7 +609,7 @@ def make_scenario(
         thermals = []
         for _j in range(k):
             along = rng.uniform(0.2, 0.8)
-            across = rng.uniform(-0.3, 0.3) * dist
+            across = rng.uniform(-spec.lateral_spread, spec.lateral_spread) * dist
             tn = sn + along * (gn - sn) - across * math.sin(bearing)
             te = se + along * (ge - se) + across * math.cos(bearing)
             thermals.append(Thermal(north=tn, east=te, strength=rng.uniform(*strength)))

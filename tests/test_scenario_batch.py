@@ -41,6 +41,7 @@ KWARGS = [
         "goal_distance": (200.0, 900.0),
         "height": (5.0, 700.0),
     },
+    {"lateral_spread": 0.05, "n_thermals": (2, 4)},
 ]
 
 
@@ -163,6 +164,9 @@ def test_draws_respect_the_ranges(
         ({"drift": "yes"}, "drift"),
         ({"bounds": "box"}, "bounds"),
         ({"name": 3}, "name"),
+        ({"lateral_spread": -0.1}, "lateral_spread"),
+        ({"lateral_spread": 1.5}, "lateral_spread"),
+        ({"lateral_spread": "wide"}, "lateral_spread"),
     ],
 )
 def test_bad_ranges_raise_naming_the_field(kw: dict, field: str) -> None:
@@ -273,3 +277,31 @@ def test_random_seed_names_stay_v1_bit_for_bit() -> None:
         assert Scenario.from_dict(d) == get_scenario(path.stem)
     spec = Spec()
     assert spec.domain == Bounds(-3000.0, 3000.0, -3000.0, 3000.0, 1500.0)
+
+
+@pytest.mark.parametrize("spread", [0.0, 0.1, 0.3])
+def test_lateral_spread_bounds_the_thermals_distance_from_the_line(spread: float) -> None:
+    """Thermals lie within spread x goal distance of the start-goal line, both draws; 0: on it."""
+    kw = {"lateral_spread": spread, "n_thermals": (3, 5)}
+    batch = draw_scenario_arrays(np.random.default_rng(4), 64, **kw)
+    singles = [make_scenario(np.random.default_rng(i), **kw) for i in range(64)]
+    offsets = []
+    for i in range(len(batch)):
+        for sc in (batch.scenario(i), singles[i]):
+            s0 = np.array(sc.start[:2])
+            line = np.array([sc.goal.north, sc.goal.east]) - s0
+            dist = float(np.hypot(*line))
+            for t in sc.field.thermals:
+                rel = np.array([t.north, t.east]) - s0
+                across = abs(line[0] * rel[1] - line[1] * rel[0]) / dist
+                offsets.append(across / dist)
+                assert across <= spread * dist + 1e-6
+    if spread > 0:
+        assert max(offsets) > 0.5 * spread  # the whole band is used
+
+
+def test_default_lateral_spread_keeps_the_draws_bit_for_bit() -> None:
+    a = draw_scenario_arrays(np.random.default_rng(9), 16)
+    b = draw_scenario_arrays(np.random.default_rng(9), 16, lateral_spread=0.3)
+    assert _bits(a.thermals) == _bits(b.thermals) and _bits(a.params) == _bits(b.params)
+    assert make_scenario(np.random.default_rng(9)) == make_scenario(np.random.default_rng(9), lateral_spread=0.3)

@@ -77,8 +77,20 @@ _HEAD = 10
 _PER_THERMAL = 3
 
 # Columns of the kernel's range row (see _range_row).
-_R_GD, _R_H, _R_S, _R_WS, _R_NMIN, _R_NMAX, _R_EMIN, _R_EMAX, _R_HMAX, _R_MARGIN = 0, 2, 4, 6, 8, 9, 10, 11, 12, 13
-_N_RANGE = 14
+_R_GD, _R_H, _R_S, _R_WS, _R_NMIN, _R_NMAX, _R_EMIN, _R_EMAX, _R_HMAX, _R_MARGIN, _R_LAT = (
+    0,
+    2,
+    4,
+    6,
+    8,
+    9,
+    10,
+    11,
+    12,
+    13,
+    14,
+)
+_N_RANGE = 15
 
 
 def batched_draws(generator: Any, kwargs: Mapping[str, Any]) -> bool:
@@ -130,6 +142,7 @@ def _range_row(spec: RandomScenarioSpec) -> np.ndarray:
     row[_R_NMIN], row[_R_NMAX], row[_R_EMIN], row[_R_EMAX] = b.north_min, b.north_max, b.east_min, b.east_max
     row[_R_HMAX] = b.height_max
     row[_R_MARGIN] = RANDOM_MARGIN
+    row[_R_LAT] = spec.lateral_spread
     row.setflags(write=False)
     return row
 
@@ -158,6 +171,7 @@ def _draw_row(
     ``make_scenario``. False if ``max_tries`` tries all failed.
     """
     nmin, nmax, emin, emax, hmax, margin = r[_R_NMIN], r[_R_NMAX], r[_R_EMIN], r[_R_EMAX], r[_R_HMAX], r[_R_MARGIN]
+    lat = r[_R_LAT]
     cn = 0.5 * (nmin + nmax)
     ce = 0.5 * (emin + emax)
     span_n = nmax - nmin
@@ -191,7 +205,7 @@ def _draw_row(
         we = ws * math.sin(wd)
         for j in range(k):
             along = 0.2 + 0.6 * x[_HEAD + _PER_THERMAL * j]
-            across = (-0.3 + 0.6 * x[_HEAD + _PER_THERMAL * j + 1]) * dist
+            across = (-lat + 2.0 * lat * x[_HEAD + _PER_THERMAL * j + 1]) * dist  # default: -0.3 + 0.6 x
             th[i, j, :] = th_t
             th[i, j, 0] = sn + along * (gn - sn) - across * sb
             th[i, j, 1] = se + along * (ge - se) + across * cb
