@@ -15,12 +15,14 @@ from soaring_env._validation import ConfigError
 
 #: below this many rows per thread the hand-off (tens of microseconds) costs more than it saves
 MIN_ROWS_PER_THREAD = 64
+#: more threads than this is a mistake rather than a machine
+MAX_THREADS = 256
 
 
 def check_threads(value: object) -> int:
     """``value`` as a thread count (an integer >= 1), or a :class:`ConfigError` naming it."""
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise ConfigError(f"num_threads={value!r} must be an integer >= 1 (1: no worker threads)")
+    if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= MAX_THREADS:
+        raise ConfigError(f"num_threads={value!r} must be an integer in 1..{MAX_THREADS} (1: no worker threads)")
     return int(value)
 
 
@@ -57,4 +59,4 @@ class RowThreads:
 #: the single-threaded runner, shared by every caller that asks for none
 SERIAL = RowThreads(1)
 
-__all__ = ["MIN_ROWS_PER_THREAD", "SERIAL", "RowThreads", "check_threads"]
+__all__ = ["MAX_THREADS", "MIN_ROWS_PER_THREAD", "SERIAL", "RowThreads", "check_threads"]

@@ -282,7 +282,7 @@ def test_threads_give_the_same_steps_bit_for_bit(env_id: str) -> None:
         e.close()
 
 
-@pytest.mark.parametrize("bad", [0, -2, 1.5, "2", True, None])
+@pytest.mark.parametrize("bad", [0, -2, 1.5, "2", True, None, 10**6])
 def test_bad_thread_counts_are_explained(bad: object) -> None:
     with pytest.raises(ConfigError, match="num_threads"):
         SoaringVectorEnv(num_envs=2, num_threads=bad)
