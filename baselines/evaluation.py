@@ -71,7 +71,14 @@ AGENT_NAMES = (
     "random",
 )
 #: env settings that change only the reward (a PPO run's are not carried into its evaluation env)
-REWARD_ONLY_KWARGS = ("energy_weight", "goal_bonus", "crash_penalty", "out_of_bounds_penalty", "progress_weight")
+REWARD_ONLY_KWARGS = (
+    "energy_weight",
+    "goal_bonus",
+    "crash_penalty",
+    "out_of_bounds_penalty",
+    "progress_weight",
+    "settle_height",
+)
 #: PPO agent name -> training algorithm (see :data:`baselines.ppo.ALGOS`).
 PPO_AGENTS = {"ppo-discrete": "discrete", "ppo-masked": "masked", "ppo-continuous": "continuous"}
 

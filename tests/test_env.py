@@ -575,3 +575,56 @@ def test_energy_weight_scales_only_the_energy_reward() -> None:
         assert rb[4]["reward_terms"]["progress"] == ra[4]["reward_terms"]["progress"]
     with pytest.raises(ConfigError, match="energy_weight"):
         gym.make(ENV_ID, energy_weight=-1.0)
+
+
+def _action(env_id: str, rng: np.random.Generator) -> int | np.ndarray:
+    return int(rng.integers(N_PRIMITIVES)) if env_id == ENV_ID else rng.uniform(-0.3, 0.3, 3).astype(np.float32)
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_settle_height_makes_a_truncated_flight_pay_as_if_it_ended_at_the_goal_top(env_id: str) -> None:
+    """Closed form: with ``settle_height`` the energy and settlement rewards of a truncated episode
+    sum to ``w (g (h_top - h_start) - fuel - kinetic) / 1 kJ/kg``; other steps are
+    unchanged, and the native vector env pays the same."""
+    w, n_steps, seeds = 2.0, 6, (5, 6, 7)
+    kw = {"energy_weight": w, "max_steps": n_steps, "scenario": "random"}
+    plain = [gym.make(env_id, **kw) for _ in seeds]
+    settled = [gym.make(env_id, settle_height=True, **kw) for _ in seeds]
+    vec = gym.make_vec(env_id, num_envs=len(seeds), settle_height=True, **kw)
+    vec.reset(seed=list(seeds))
+    for e, f, seed in zip(plain, settled, seeds, strict=True):
+        e.reset(seed=seed)
+        f.reset(seed=seed)
+    rng = np.random.default_rng(0)
+    fuel_kinetic = np.zeros(len(seeds))
+    total = np.zeros(len(seeds))
+    done = np.zeros(len(seeds), dtype=bool)
+    n_truncated = 0
+    for _ in range(n_steps):
+        actions = [_action(env_id, rng) for _ in seeds]
+        rv = vec.step(np.array(actions))
+        for i, (e, f) in enumerate(zip(plain, settled, strict=True)):
+            if done[i]:
+                continue
+            rp, rs = e.step(actions[i]), f.step(actions[i])
+            assert np.array_equal(rp[0], rs[0]) and rv[1][i] == rs[1]
+            terms = rs[4]["reward_terms"]
+            fuel_kinetic[i] += rs[4]["fuel"] + rs[4]["kinetic"]
+            total[i] += terms["energy"] + terms["settlement"]
+            if rs[3] and not rs[2]:  # truncated by the step limit
+                sc = f.unwrapped.scenario
+                h_top = sc.goal.height + sc.goal.radius
+                expect = w * (9.80665 * (h_top - sc.start[3]) - fuel_kinetic[i]) / 1000.0
+                assert total[i] == pytest.approx(expect, rel=1e-9, abs=1e-9)
+                assert rs[1] == pytest.approx(rp[1] + terms["settlement"]) and terms["settlement"] != 0.0
+                n_truncated += 1
+            else:
+                assert terms["settlement"] == 0.0 and rs[1] == rp[1]
+            done[i] = rs[2] or rs[3]
+    assert n_truncated >= 1
+    with pytest.raises(ConfigError, match="settle_height"):
+        gym.make(env_id, settle_height="yes")
+    with pytest.raises(ConfigError, match="settle_height"):
+        gym.make("soaring/ThermalClimbContinuous-v0", settle_height=True)
+    for env in (*plain, *settled, vec):
+        env.close()

@@ -90,6 +90,13 @@ class SoaringEnvConfig:
     :param progress_weight: potential-based shaping [reward per km]: each step adds
         ``progress_weight * (d_before - d_after) / 1 km`` with ``d`` the 3-D distance to the goal
         centre; it telescopes, so it changes no optimal policy (gamma = 1). 0 switches it off.
+    :param settle_height: a training aid for soaring toward a goal (default False: off). On
+        truncation (an episode that ends by its limit, not at the goal, the ground or the edge) add
+        ``energy_weight x g (h_top - h_end) / 1 kJ/kg``, h_top the goal region's top [m]: the
+        episode's energy rewards then sum to ``-(fuel + kinetic) + g (h_top - h_start)``, as for a
+        flight that ends at the goal top, so height climbed in a thermal and kept to the end earns
+        nothing by itself -- only the fuel it saves on the way to the goal pays. Without it a policy
+        can bank a thermal's climb by circling until the limit. Needs a task with a goal.
     :param render_size: (width, height) of ``rgb_array`` frames [px].
     :param envelope: continuous envs: ``"paper"`` (default: the primitives' envelope, turn rates
         +-1080 deg / Ts) or ``"physical"`` (airspeed, bank-angle and stall limits, independent of
@@ -133,6 +140,7 @@ class SoaringEnvConfig:
     crash_penalty: float = 25.0
     out_of_bounds_penalty: float = 25.0
     progress_weight: float = 1.0
+    settle_height: bool = False
     render_size: tuple[int, int] = (960, 640)
     envelope: str = "paper"
     airspeed_range: tuple[float, float] = (12.0, 25.0)
@@ -161,6 +169,7 @@ class SoaringEnvConfig:
         bank = check_range("max_bank_deg", self.max_bank_deg, 0.0, 90.0, low_open=True, high_open=True)
         object.__setattr__(self, "max_bank_deg", bank)
         check_bool("observe_thermals", self.observe_thermals)
+        check_bool("settle_height", self.settle_height)
         check_int("n_obs_thermals", self.n_obs_thermals, 0, 64)
         for name in ("position_scale", "height_scale", "updraft_scale", "speed_scale", "wind_scale"):
             object.__setattr__(self, name, check_positive(name, getattr(self, name)))

@@ -23,6 +23,8 @@ from soaring_env.env.observation import (
     N_BASE,
     N_GOAL,
     N_PARAMS,
+    P_GH,
+    P_GR,
     observation_layout,
     observe_batch,
     scenario_params,
@@ -30,6 +32,7 @@ from soaring_env.env.observation import (
 )
 from soaring_env.env.scenario_batch import ScenarioSampler, batched_draws, scenario_from_row
 from soaring_env.model import BATTERY_EMPTY, OUTCOMES, SoaringModel
+from soaring_env.physics.atmosphere import G
 from soaring_env.physics.thermals import PACKED_COLUMNS, WindField
 from soaring_env.primitives import N_PRIMITIVES, ControlEnvelope, PrimitiveLibrary
 from soaring_env.scenario import Scenario, get_scenario, make_scenario
@@ -259,6 +262,9 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         self._dt = self.library.duration / self.library.n_points
         self._w_progress = float(cfg.progress_weight)
         self._w_energy = float(cfg.energy_weight)
+        self._settle = bool(cfg.settle_height)
+        if self._settle and not self.has_goal:
+            raise ConfigError(f"settle_height=True needs a goal; {type(self).__name__} has none (allowed: False)")
         # Terminal reward terms indexed by the outcome code (FLYING, GOAL, CRASH, OUT_OF_BOUNDS, BATTERY_EMPTY).
         self._terminal = {
             name: np.array([value if code == c else 0.0 for c in range(len(OUTCOMES))])
@@ -374,6 +380,13 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         for key, by_code in self._terminal.items():
             terms[key] = by_code[code]
         return terms
+
+    def settle_terms(self, terms: dict[str, Any], truncated, h_end, goal_top) -> None:
+        """Add the ``settlement`` term of ``config.settle_height`` to ``terms`` in place (nothing when
+        off): ``energy_weight g (goal_top - h_end) / 1 kJ/kg`` [m -> reward] where ``truncated``, else 0
+        -- floats for one edge, arrays for a batch. ``truncated`` must be False on terminating steps."""
+        if self._settle:
+            terms["settlement"] = np.where(truncated, self._w_energy * G * (goal_top - h_end) / ENERGY_SCALE, 0.0)
 
     # --- scenario handling -----------------------------------------------------------------------
     def _install(self, sc: Scenario) -> None:
@@ -563,14 +576,16 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         self.updraft = updraft
         outcome = OUTCOMES[code]
         self.outcome = outcome
-        reward_terms = {key: float(v) for key, v in self.reward_terms(cost, self._d_goal, d_new, code).items()}
-        reward = sum(reward_terms.values())
-        self._d_goal = d_new
         terminated = code != FLYING
         # the step limit truncates as gymnasium's TimeLimit does (also on the terminating step)
         truncated = self.steps >= self._max_steps or (not terminated and t_new >= self._time_limit - 1e-9)
         self._needs_reset = terminated or truncated
         h = float(new_state[0, 3])
+        by_term = self.reward_terms(cost, self._d_goal, d_new, code)
+        self.settle_terms(by_term, truncated and not terminated, h, self._prm[0, P_GH] + self._prm[0, P_GR])
+        reward_terms = {key: float(v) for key, v in by_term.items()}
+        reward = sum(reward_terms.values())
+        self._d_goal = d_new
         self._path.append(out[0, : k + 1])
         hist = self.history
         hist["time"].append(t_new)
