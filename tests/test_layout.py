@@ -24,7 +24,7 @@ PACKAGES = ("soaring_env", "baselines")
 #: longest entry that is it or one of its parent packages (``soaring_env`` alone is the package's
 #: facade ``__init__``, and any new top-level module until it is placed here).
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("soaring_env._jit", "soaring_env._validation"),
+    ("soaring_env._jit", "soaring_env._validation", "soaring_env._threads"),
     ("soaring_env.physics",),
     ("soaring_env.primitives", "soaring_env.scenario"),
     ("soaring_env.model",),
