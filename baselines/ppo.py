@@ -29,7 +29,9 @@ import dataclasses
 import json
 import math
 import platform
+import signal
 import sys
+import threading
 import time
 import warnings
 from collections.abc import Callable, Mapping, Sequence
@@ -651,6 +653,48 @@ def _wall_clock_callback(max_minutes: float, t_start: float) -> Any:
     return StopOnWallClock()
 
 
+class _StopSignals:
+    """While active, SIGTERM and SIGINT ask training to stop at the next step instead of killing it:
+    the run then ends as a wall-clock cap ends it, with ``model.zip`` and ``config.json`` written.
+    A second signal acts as usual (the handlers are restored at the first). Main thread only."""
+
+    SIGNALS = ("SIGTERM", "SIGINT")
+
+    def __init__(self) -> None:
+        self.received: str | None = None
+        self._old: dict[int, Any] = {}
+
+    def _handle(self, signum: int, _frame: Any) -> None:
+        self.received = signal.Signals(signum).name
+        self.restore()
+
+    def __enter__(self) -> _StopSignals:
+        if threading.current_thread() is threading.main_thread():
+            for name in self.SIGNALS:
+                num = getattr(signal, name)
+                self._old[num] = signal.signal(num, self._handle)
+        return self
+
+    def restore(self) -> None:
+        for num, old in self._old.items():
+            signal.signal(num, old)
+        self._old = {}
+
+    def __exit__(self, *exc: object) -> None:
+        self.restore()
+
+    def callback(self) -> Any:
+        from stable_baselines3.common.callbacks import BaseCallback
+
+        stop = self
+
+        class StopOnSignal(BaseCallback):
+            def _on_step(self) -> bool:
+                return stop.received is None
+
+        return StopOnSignal()
+
+
 def _probe(config: TrainConfig) -> Any:
     """A raw env of ``config`` (for its observation layout)."""
     return gym.make(_module_qualified(config.env_id), **dict(config.env_kwargs)).unwrapped
@@ -708,98 +752,108 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
         "versions": _versions(),
         "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
     }
+    signals = _StopSignals().__enter__()  # from here a SIGTERM or SIGINT ends the run gracefully
     atomic_write_text(out / "config.json", json.dumps(record, indent=2))
+    try:
+        train_env: Any
+        if config.vec_env == "native":
+            train_env = make_native_train_env(
+                config.env_id, config.n_envs, config.env_kwargs, bool(config.body_frame), config.turn_exponent
+            )
+            train_env.seed(config.seed)  # as make_vec_env seeds: env i resets with seed + i
+        else:
+            train_env = make_vec_env(
+                make_train_env,
+                n_envs=config.n_envs,
+                seed=config.seed,
+                vec_env_cls=SubprocVecEnv if config.vec_env == "subproc" else DummyVecEnv,
+                env_kwargs={
+                    "env_id": config.env_id,
+                    "env_kwargs": config.env_kwargs,
+                    "shaping": config.shaping,
+                    "gamma": config.gamma,
+                    "body_frame": bool(config.body_frame),
+                    "turn_exponent": config.turn_exponent,
+                },
+            )
+        scenarios = validation_scenarios(
+            config.n_eval_scenarios, random_scenario_kwargs(config.env_kwargs), config.family
+        )
+        eval_env = DummyVecEnv(
+            [
+                lambda: Monitor(
+                    make_eval_env(
+                        config.env_id, scenarios, config.env_kwargs, bool(config.body_frame), config.turn_exponent
+                    )
+                )
+            ]
+        )
 
-    train_env: Any
-    if config.vec_env == "native":
-        train_env = make_native_train_env(
-            config.env_id, config.n_envs, config.env_kwargs, bool(config.body_frame), config.turn_exponent
-        )
-        train_env.seed(config.seed)  # as make_vec_env seeds: env i resets with seed + i
-    else:
-        train_env = make_vec_env(
-            make_train_env,
-            n_envs=config.n_envs,
+        algo_cls = _algo_class(config.algo)
+        policy_kwargs: dict[str, Any] = {"net_arch": {"pi": list(config.net_arch), "vf": list(config.net_arch)}}
+        if config.algo == "continuous":
+            policy_kwargs["log_std_init"] = config.log_std_init
+        model = algo_cls(
+            "MlpPolicy",
+            train_env,
+            learning_rate=_linear_schedule(config.learning_rate, config.lr_final_fraction),
+            n_steps=config.n_steps,
+            batch_size=config.batch_size,
+            n_epochs=config.n_epochs,
+            gamma=config.gamma,
+            gae_lambda=config.gae_lambda,
+            clip_range=config.clip_range,
+            ent_coef=config.ent_coef,
+            vf_coef=config.vf_coef,
+            max_grad_norm=config.max_grad_norm,
+            policy_kwargs=policy_kwargs,
+            tensorboard_log=str(out / "tb") if config.tensorboard else None,
             seed=config.seed,
-            vec_env_cls=SubprocVecEnv if config.vec_env == "subproc" else DummyVecEnv,
-            env_kwargs={
-                "env_id": config.env_id,
-                "env_kwargs": config.env_kwargs,
-                "shaping": config.shaping,
-                "gamma": config.gamma,
-                "body_frame": bool(config.body_frame),
-                "turn_exponent": config.turn_exponent,
-            },
+            device="cpu",
+            verbose=max(config.verbose, 0),
         )
-    scenarios = validation_scenarios(config.n_eval_scenarios, random_scenario_kwargs(config.env_kwargs), config.family)
-    eval_env = DummyVecEnv(
-        [
-            lambda: Monitor(
-                make_eval_env(
-                    config.env_id, scenarios, config.env_kwargs, bool(config.body_frame), config.turn_exponent
+        if config.init_from is not None:
+            _init_policy_from(model, config.init_from, config.log_std_init)
+        t_start = time.perf_counter()
+        # the native training env and the validation env are different VecEnv classes, by design
+        warnings.filterwarnings("ignore", message="Training and eval env are not of the same type")
+        eval_cb = _eval_callback(config, eval_env, out, t_start, 1)
+        callbacks: list[Any] = [eval_cb]
+        if config.checkpoint_freq:
+            callbacks.append(
+                CheckpointCallback(
+                    save_freq=max(1, config.checkpoint_freq // config.n_envs),
+                    save_path=str(out / "checkpoints"),
+                    name_prefix=config.algo,
                 )
             )
-        ]
-    )
-
-    algo_cls = _algo_class(config.algo)
-    policy_kwargs: dict[str, Any] = {"net_arch": {"pi": list(config.net_arch), "vf": list(config.net_arch)}}
-    if config.algo == "continuous":
-        policy_kwargs["log_std_init"] = config.log_std_init
-    model = algo_cls(
-        "MlpPolicy",
-        train_env,
-        learning_rate=_linear_schedule(config.learning_rate, config.lr_final_fraction),
-        n_steps=config.n_steps,
-        batch_size=config.batch_size,
-        n_epochs=config.n_epochs,
-        gamma=config.gamma,
-        gae_lambda=config.gae_lambda,
-        clip_range=config.clip_range,
-        ent_coef=config.ent_coef,
-        vf_coef=config.vf_coef,
-        max_grad_norm=config.max_grad_norm,
-        policy_kwargs=policy_kwargs,
-        tensorboard_log=str(out / "tb") if config.tensorboard else None,
-        seed=config.seed,
-        device="cpu",
-        verbose=max(config.verbose, 0),
-    )
-    if config.init_from is not None:
-        _init_policy_from(model, config.init_from, config.log_std_init)
-    t_start = time.perf_counter()
-    # the native training env and the validation env are different VecEnv classes, by design
-    warnings.filterwarnings("ignore", message="Training and eval env are not of the same type")
-    eval_cb = _eval_callback(config, eval_env, out, t_start, 1)
-    callbacks: list[Any] = [eval_cb]
-    if config.checkpoint_freq:
-        callbacks.append(
-            CheckpointCallback(
-                save_freq=max(1, config.checkpoint_freq // config.n_envs),
-                save_path=str(out / "checkpoints"),
-                name_prefix=config.algo,
-            )
-        )
-    if config.max_minutes is not None:
-        callbacks.append(_wall_clock_callback(config.max_minutes, t_start))
-    progress = config.progress_bar
-    if progress:
+        if config.max_minutes is not None:
+            callbacks.append(_wall_clock_callback(config.max_minutes, t_start))
+        progress = config.progress_bar
+        if progress:
+            try:
+                import rich  # noqa: F401
+                import tqdm  # noqa: F401
+            except ImportError:
+                print("tqdm/rich are not installed: training without a progress bar", file=sys.stderr)
+                progress = False
+        callbacks.append(signals.callback())
         try:
-            import rich  # noqa: F401
-            import tqdm  # noqa: F401
-        except ImportError:
-            print("tqdm/rich are not installed: training without a progress bar", file=sys.stderr)
-            progress = False
-    try:
-        model.learn(
-            total_timesteps=config.total_timesteps,
-            callback=CallbackList(callbacks),
-            progress_bar=progress,
-            tb_log_name=config.algo,
-        )
-    finally:
-        train_env.close()
-        eval_env.close()
+            model.learn(
+                total_timesteps=config.total_timesteps,
+                callback=CallbackList(callbacks),
+                progress_bar=progress,
+                tb_log_name=config.algo,
+            )
+        finally:
+            signals.restore()
+            train_env.close()
+            eval_env.close()
+    except BaseException:
+        signals.restore()
+        raise
+    if signals.received is not None:
+        print(f"[train_ppo] {signals.received}: stopped early; saving the model", file=sys.stderr)
     wall = time.perf_counter() - t_start
     model.save(str(out / "model.zip"))
     record.update(
@@ -808,7 +862,10 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
         train_wall_s=round(wall, 1),
         timesteps_done=int(model.num_timesteps),
         steps_per_s=round(model.num_timesteps / max(wall, 1e-9), 1),
-        stopped_by_wall_clock=bool(config.max_minutes is not None and model.num_timesteps < config.total_timesteps),
+        stopped_by_wall_clock=bool(
+            signals.received is None and config.max_minutes is not None and model.num_timesteps < config.total_timesteps
+        ),
+        stopped_by_signal=signals.received,
         final_eval=eval_cb.records[-1] if eval_cb.records else None,
         best_eval=max(eval_cb.records, key=lambda r: r["mean_return"]) if eval_cb.records else None,
     )

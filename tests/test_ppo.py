@@ -271,3 +271,37 @@ def test_init_from_continues_an_earlier_run(trained: dict[str, Path], tmp_path: 
     assert json.loads((run / "config.json").read_text())["config"]["init_from"] == str(trained["continuous"])
     with pytest.raises(ValueError, match="does not fit"):
         train(dataclasses.replace(_tiny("discrete"), init_from=str(trained["continuous"])), tmp_path / "bad")
+
+
+def test_a_terminated_run_stops_gracefully_and_keeps_its_model(tmp_path: Path) -> None:
+    """SIGTERM during training ends the run as a wall-clock cap would: model.zip and config.json
+    are written, with the signal recorded (a killed run used to lose everything since its last
+    checkpoint)."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "run"
+    code = (
+        "from baselines.ppo import TrainConfig, train\n"
+        "train(TrainConfig(algo='continuous', total_timesteps=10**8, n_envs=2, n_steps=64, batch_size=64,"
+        " n_epochs=1, eval_freq=10**9, n_eval_scenarios=1, checkpoint_freq=0, progress_bar=False),"
+        f" {str(out)!r})\n"
+    )
+    proc = subprocess.Popen([sys.executable, "-c", code], cwd=Path(__file__).resolve().parents[1])
+    try:
+        deadline = time.monotonic() + 120
+        while not (out / "config.json").exists():  # written when training starts
+            assert proc.poll() is None and time.monotonic() < deadline
+            time.sleep(0.2)
+        time.sleep(2.0)  # well into learn()
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=120) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    record = json.loads((out / "config.json").read_text())
+    assert record["status"] == "done" and record["stopped_by_signal"] == "SIGTERM"
+    assert not record["stopped_by_wall_clock"] and record["timesteps_done"] > 0
+    assert (out / "model.zip").is_file()
