@@ -381,12 +381,14 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
             terms[key] = by_code[code]
         return terms
 
-    def settle_terms(self, terms: dict[str, Any], truncated, h_end, goal_top) -> None:
+    def settle_terms(self, terms: dict[str, Any], truncated, h_end, prm: np.ndarray) -> None:
         """Add the ``settlement`` term of ``config.settle_height`` to ``terms`` in place (nothing when
-        off): ``energy_weight g (goal_top - h_end) / 1 kJ/kg`` [m -> reward] where ``truncated``, else 0
-        -- floats for one edge, arrays for a batch. ``truncated`` must be False on terminating steps."""
+        off): ``energy_weight g (h_top - h_end) / 1 kJ/kg`` where ``truncated``, else 0, h_top [m] the
+        goal top of the :func:`scenario_params` row(s) ``prm`` -- a float for one edge, arrays for a
+        batch. ``truncated`` must be False on terminating steps."""
         if self._settle:
-            terms["settlement"] = np.where(truncated, self._w_energy * G * (goal_top - h_end) / ENERGY_SCALE, 0.0)
+            h_top = prm[..., P_GH] + prm[..., P_GR]
+            terms["settlement"] = np.where(truncated, self._w_energy * G * (h_top - h_end) / ENERGY_SCALE, 0.0)
 
     # --- scenario handling -----------------------------------------------------------------------
     def _install(self, sc: Scenario) -> None:
@@ -582,7 +584,7 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         self._needs_reset = terminated or truncated
         h = float(new_state[0, 3])
         by_term = self.reward_terms(cost, self._d_goal, d_new, code)
-        self.settle_terms(by_term, truncated and not terminated, h, self._prm[0, P_GH] + self._prm[0, P_GR])
+        self.settle_terms(by_term, truncated and not terminated, h, self._prm[0])
         reward_terms = {key: float(v) for key, v in by_term.items()}
         reward = sum(reward_terms.values())
         self._d_goal = d_new

@@ -45,7 +45,7 @@ from soaring_env.env._kernels import (
 )
 from soaring_env.env.config import SoaringEnvConfig, choose_scenario
 from soaring_env.env.core import SoaringBaseEnv, SoaringContinuousEnv, SoaringEnv
-from soaring_env.env.observation import N_PARAMS, P_GH, P_GR, P_WN, observe_batch, scenario_params, sensor_noise
+from soaring_env.env.observation import N_PARAMS, P_WN, observe_batch, scenario_params, sensor_noise
 from soaring_env.env.scenario_batch import (
     ScenarioSampler,
     batched_draws,
@@ -500,7 +500,6 @@ class _SoaringVectorBase(VectorEnv):
         d_new = self._dist.copy()
         reward_terms = t.reward_terms(cost, self._d_goal, d_new, codes)
         terminated = codes != FLYING
-        goal_top = self._prm[:, P_GH] + self._prm[:, P_GR]  # this episode's: resets come below
         self.states = new_states
         self.times = t_new
         self.airspeed_prev = airspeed.copy()
@@ -513,7 +512,7 @@ class _SoaringVectorBase(VectorEnv):
             truncated = self.steps >= self.max_episode_steps
         if t._time_limit != np.inf:
             truncated |= ~terminated & (t_new >= t._time_limit - 1e-9)
-        t.settle_terms(reward_terms, truncated & ~terminated, new_states[:, 3], goal_top)
+        t.settle_terms(reward_terms, truncated & ~terminated, new_states[:, 3], self._prm)  # resets come below
         reward = sum(reward_terms.values())
         infos: dict[str, Any] = {
             "energy_spent": self.energy_spent.copy(),
