@@ -654,9 +654,10 @@ def _wall_clock_callback(max_minutes: float, t_start: float) -> Any:
 
 
 class _StopSignals:
-    """While active, SIGTERM and SIGINT ask training to stop at the next step instead of killing it:
-    the run then ends as a wall-clock cap ends it, with ``model.zip`` and ``config.json`` written.
-    A second signal acts as usual (the handlers are restored at the first). Main thread only."""
+    """Between :meth:`install` and :meth:`restore`, SIGTERM and SIGINT ask training to stop at the
+    next step instead of killing it: the run then ends as a wall-clock cap ends it, with
+    ``model.zip`` and ``config.json`` written. A second signal acts as usual (the handlers are
+    restored at the first). Main thread only (elsewhere nothing is installed)."""
 
     SIGNALS = ("SIGTERM", "SIGINT")
 
@@ -668,7 +669,7 @@ class _StopSignals:
         self.received = signal.Signals(signum).name
         self.restore()
 
-    def __enter__(self) -> _StopSignals:
+    def install(self) -> _StopSignals:
         if threading.current_thread() is threading.main_thread():
             for name in self.SIGNALS:
                 num = getattr(signal, name)
@@ -679,9 +680,6 @@ class _StopSignals:
         for num, old in self._old.items():
             signal.signal(num, old)
         self._old = {}
-
-    def __exit__(self, *exc: object) -> None:
-        self.restore()
 
     def callback(self) -> Any:
         from stable_baselines3.common.callbacks import BaseCallback
@@ -752,7 +750,7 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
         "versions": _versions(),
         "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
     }
-    signals = _StopSignals().__enter__()  # from here a SIGTERM or SIGINT ends the run gracefully
+    signals = _StopSignals().install()  # from here a SIGTERM or SIGINT ends the run gracefully
     atomic_write_text(out / "config.json", json.dumps(record, indent=2))
     try:
         train_env: Any

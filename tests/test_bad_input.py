@@ -413,3 +413,12 @@ def test_sb3_adapter_and_init_from_arguments(tmp_path: Path) -> None:
         TrainConfig(init_from=5)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="init_from"):
         TrainConfig(init_from=str(tmp_path))
+
+
+@pytest.mark.parametrize("value", ["0", "-1", "100000"])
+def test_bench_env_rejects_bad_thread_counts_before_measuring(value: str, capsys: pytest.CaptureFixture) -> None:
+    from baselines.cli.bench_env import main
+
+    with pytest.raises(SystemExit) as err:
+        main(["--threads", value])
+    assert err.value.code == 2 and "--threads" in capsys.readouterr().err

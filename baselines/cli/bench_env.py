@@ -38,6 +38,8 @@ import numpy as np
 
 import soaring_env  # noqa: F401  (registers the ids)
 from baselines._runs import check_cli_args
+from soaring_env._threads import check_threads
+from soaring_env._validation import ConfigError
 
 SINGLE_TARGET_RATIO = 3.0
 NATIVE_TARGET = 500_000.0
@@ -123,8 +125,10 @@ def main(argv: list[str] | None = None) -> int:
     check_cli_args(p, args, counts=("repeats", "num_envs", "sync_envs"), positive=("seconds",))
     cores = usable_cores()
     threads = len(cores) if args.threads is None else args.threads
-    if threads < 1:
-        p.error(f"--threads={threads} must be >= 1")
+    try:
+        check_threads(threads)
+    except ConfigError as err:
+        p.error(f"--threads: {err}")
 
     pinning = pin_one_core()
     print(f"soaring-env benchmark | {pinning} | NUMBA_NUM_THREADS={os.environ['NUMBA_NUM_THREADS']}")
