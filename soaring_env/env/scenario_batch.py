@@ -77,19 +77,8 @@ _HEAD = 10
 _PER_THERMAL = 3
 
 # Columns of the kernel's range row (see _range_row).
-_R_GD, _R_H, _R_S, _R_WS, _R_NMIN, _R_NMAX, _R_EMIN, _R_EMAX, _R_HMAX, _R_MARGIN, _R_LAT = (
-    0,
-    2,
-    4,
-    6,
-    8,
-    9,
-    10,
-    11,
-    12,
-    13,
-    14,
-)
+_R_GD, _R_H, _R_S, _R_WS, _R_NMIN, _R_NMAX, _R_EMIN, _R_EMAX, _R_HMAX, _R_MARGIN = 0, 2, 4, 6, 8, 9, 10, 11, 12, 13
+_R_LAT = 14  # lateral_spread
 _N_RANGE = 15
 
 
