@@ -466,8 +466,11 @@ class RandomScenarioSpec:
     in [0, 50] m/s, ``goal_distance`` [m] above the goal radius (150 m) and within the domain,
     ``height`` [m] inside (0, ``bounds.height_max``]; ``zi`` [m] > 0; ``lateral_spread`` in [0, 1]:
     thermals lie up to this fraction of the goal distance to either side of the start-goal line
-    (0.3, the default; 0 puts them on it -- a curriculum in which flying straight meets the lift).
-    A bad one raises a :class:`ConfigError` naming it. ``bounds=None`` is :func:`default_random_bounds`.
+    (0.3, the default; 0 puts them on it -- a curriculum in which flying straight meets the lift);
+    ``thermal_along`` within [0, 1]: the thermals' positions along that line, as fractions of the
+    goal distance from the start ((0.2, 0.8), the default; (0, 0.1) puts them at the start -- a
+    curriculum that starts the aircraft in lift). A bad one raises a :class:`ConfigError` naming
+    it. ``bounds=None`` is :func:`default_random_bounds`.
     """
 
     n_thermals: tuple[int, int] = (1, 5)
@@ -481,9 +484,11 @@ class RandomScenarioSpec:
     bounds: Bounds | None = None
     name: str = "random"
     lateral_spread: float = 0.3
+    thermal_along: tuple[float, float] = (0.2, 0.8)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "lateral_spread", check_range("lateral_spread", self.lateral_spread, 0.0, 1.0))
+        object.__setattr__(self, "thermal_along", check_pair("thermal_along", self.thermal_along, 0.0, 1.0))
         bounds = default_random_bounds() if self.bounds is None else self.bounds
         check_type("bounds", bounds, Bounds)
         object.__setattr__(self, "bounds", bounds)
@@ -538,6 +543,7 @@ def make_scenario(
     bounds: Bounds | None = None,
     name: str = "random",
     lateral_spread: float = 0.3,
+    thermal_along: tuple[float, float] = (0.2, 0.8),
     lifecycle: tuple[float, float] | None = None,
     rise_time: float = 120.0,
     birth_window: tuple[float, float] = (0.0, 0.0),
@@ -586,6 +592,7 @@ def make_scenario(
         bounds=bounds,
         name=name,
         lateral_spread=lateral_spread,
+        thermal_along=thermal_along,
     )
     time_kw = _check_time_options(lifecycle, rise_time, birth_window, strength_variation, variation_period)
     bounds = spec.domain
@@ -608,7 +615,7 @@ def make_scenario(
         k = int(rng.integers(n_thermals[0], n_thermals[1] + 1))
         thermals = []
         for _j in range(k):
-            along = rng.uniform(0.2, 0.8)
+            along = rng.uniform(*spec.thermal_along)
             across = rng.uniform(-spec.lateral_spread, spec.lateral_spread) * dist
             tn = sn + along * (gn - sn) - across * math.sin(bearing)
             te = se + along * (ge - se) + across * math.cos(bearing)

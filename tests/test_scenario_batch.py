@@ -42,6 +42,7 @@ KWARGS = [
         "height": (5.0, 700.0),
     },
     {"lateral_spread": 0.05, "n_thermals": (2, 4)},
+    {"thermal_along": (0.0, 0.1), "n_thermals": (1, 3)},
 ]
 
 
@@ -167,6 +168,11 @@ def test_draws_respect_the_ranges(
         ({"lateral_spread": -0.1}, "lateral_spread"),
         ({"lateral_spread": 1.5}, "lateral_spread"),
         ({"lateral_spread": "wide"}, "lateral_spread"),
+        ({"thermal_along": (0.5, 0.2)}, "thermal_along"),
+        ({"thermal_along": (-0.1, 0.5)}, "thermal_along"),
+        ({"thermal_along": (0.0, 1.5)}, "thermal_along"),
+        ({"thermal_along": 0.5}, "thermal_along"),
+        ({"thermal_along": ("a", 0.5)}, "thermal_along"),
     ],
 )
 def test_bad_ranges_raise_naming_the_field(kw: dict, field: str) -> None:
@@ -305,3 +311,36 @@ def test_default_lateral_spread_keeps_the_draws_bit_for_bit() -> None:
     b = draw_scenario_arrays(np.random.default_rng(9), 16, lateral_spread=0.3)
     assert _bits(a.thermals) == _bits(b.thermals) and _bits(a.params) == _bits(b.params)
     assert make_scenario(np.random.default_rng(9)) == make_scenario(np.random.default_rng(9), lateral_spread=0.3)
+
+
+@pytest.mark.parametrize("along", [(0.0, 0.0), (0.0, 0.1), (0.45, 0.55), (0.9, 1.0)])
+def test_thermal_along_places_the_thermals_along_the_line(along: tuple[float, float]) -> None:
+    """Thermals lie at ``thermal_along`` fractions of the goal distance along the start-goal line
+    (projected on it), both draws; the whole range is used."""
+    kw = {"thermal_along": along, "n_thermals": (3, 5)}
+    batch = draw_scenario_arrays(np.random.default_rng(5), 64, **kw)
+    singles = [make_scenario(np.random.default_rng(i), **kw) for i in range(64)]
+    fractions = []
+    for i in range(len(batch)):
+        for sc in (batch.scenario(i), singles[i]):
+            s0 = np.array(sc.start[:2])
+            line = np.array([sc.goal.north, sc.goal.east]) - s0
+            dist2 = float(line @ line)
+            for t in sc.field.thermals:
+                f = float((np.array([t.north, t.east]) - s0) @ line) / dist2
+                assert along[0] - 1e-9 <= f <= along[1] + 1e-9
+                fractions.append(f)
+    assert max(fractions) - min(fractions) >= 0.8 * (along[1] - along[0])
+
+
+def test_default_thermal_along_keeps_the_draws_bit_for_bit() -> None:
+    """The knob's default is the constants of both draws before it existed: same bits, both draws."""
+    a = draw_scenario_arrays(np.random.default_rng(11), 16)
+    b = draw_scenario_arrays(np.random.default_rng(11), 16, thermal_along=(0.2, 0.8))
+    assert _bits(a.thermals) == _bits(b.thermals) and _bits(a.params) == _bits(b.params)
+    # a hash of the batched draws taken before the knob existed (v2 as published)
+    c = draw_scenario_arrays(np.random.default_rng(11), 64)
+    blob = _bits(c.thermals) + _bits(c.params) + _bits(c.start)
+    assert hashlib.sha256(blob).hexdigest() == "fc4296fba8545b2b78553db8e82af4aa0fdf1c42062be5e8834e32f02148de60"
+    explicit = make_scenario(np.random.default_rng(11), thermal_along=(0.2, 0.8))
+    assert make_scenario(np.random.default_rng(11)) == explicit

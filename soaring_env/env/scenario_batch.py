@@ -79,7 +79,8 @@ _PER_THERMAL = 3
 # Columns of the kernel's range row (see _range_row).
 _R_GD, _R_H, _R_S, _R_WS, _R_NMIN, _R_NMAX, _R_EMIN, _R_EMAX, _R_HMAX, _R_MARGIN = 0, 2, 4, 6, 8, 9, 10, 11, 12, 13
 _R_LAT = 14  # lateral_spread
-_N_RANGE = 15
+_R_ALONG = 15  # thermal_along: low, width
+_N_RANGE = 17
 
 
 def batched_draws(generator: Any, kwargs: Mapping[str, Any]) -> bool:
@@ -132,6 +133,10 @@ def _range_row(spec: RandomScenarioSpec) -> np.ndarray:
     row[_R_HMAX] = b.height_max
     row[_R_MARGIN] = RANDOM_MARGIN
     row[_R_LAT] = spec.lateral_spread
+    lo, hi = spec.thermal_along
+    # the width to 15 digits: (0.2, 0.8) gives 0.6, not 0.6000000000000001, so the default's
+    # draws stay those of the constants the kernel used before the knob existed
+    row[_R_ALONG], row[_R_ALONG + 1] = lo, float(f"{hi - lo:.15g}")
     row.setflags(write=False)
     return row
 
@@ -161,6 +166,7 @@ def _draw_row(
     """
     nmin, nmax, emin, emax, hmax, margin = r[_R_NMIN], r[_R_NMAX], r[_R_EMIN], r[_R_EMAX], r[_R_HMAX], r[_R_MARGIN]
     lat = r[_R_LAT]
+    a_lo, a_w = r[_R_ALONG], r[_R_ALONG + 1]
     cn = 0.5 * (nmin + nmax)
     ce = 0.5 * (emin + emax)
     span_n = nmax - nmin
@@ -193,7 +199,7 @@ def _draw_row(
         wn = ws * math.cos(wd)
         we = ws * math.sin(wd)
         for j in range(k):
-            along = 0.2 + 0.6 * x[_HEAD + _PER_THERMAL * j]
+            along = a_lo + a_w * x[_HEAD + _PER_THERMAL * j]  # default: 0.2 + 0.6 x
             across = (-lat + 2.0 * lat * x[_HEAD + _PER_THERMAL * j + 1]) * dist  # default: -0.3 + 0.6 x
             th[i, j, :] = th_t
             th[i, j, 0] = sn + along * (gn - sn) - across * sb
