@@ -285,25 +285,30 @@ def test_random_seed_names_stay_v1_bit_for_bit() -> None:
     assert spec.domain == Bounds(-3000.0, 3000.0, -3000.0, 3000.0, 1500.0)
 
 
-@pytest.mark.parametrize("spread", [0.0, 0.1, 0.3])
-def test_lateral_spread_bounds_the_thermals_distance_from_the_line(spread: float) -> None:
-    """Thermals lie within spread x goal distance of the start-goal line, both draws; 0: on it."""
-    kw = {"lateral_spread": spread, "n_thermals": (3, 5)}
-    batch = draw_scenario_arrays(np.random.default_rng(4), 64, **kw)
+def _line_fractions(kw: dict, seed: int) -> np.ndarray:
+    """(along, across) of every thermal of 64 draws of each kind (batched and per scenario), as
+    fractions of the goal distance in the start-goal frame (across unsigned)."""
+    batch = draw_scenario_arrays(np.random.default_rng(seed), 64, **kw)
     singles = [make_scenario(np.random.default_rng(i), **kw) for i in range(64)]
-    offsets = []
+    out = []
     for i in range(len(batch)):
         for sc in (batch.scenario(i), singles[i]):
             s0 = np.array(sc.start[:2])
             line = np.array([sc.goal.north, sc.goal.east]) - s0
-            dist = float(np.hypot(*line))
+            dist2 = float(line @ line)
             for t in sc.field.thermals:
                 rel = np.array([t.north, t.east]) - s0
-                across = abs(line[0] * rel[1] - line[1] * rel[0]) / dist
-                offsets.append(across / dist)
-                assert across <= spread * dist + 1e-6
+                out.append((float(rel @ line) / dist2, abs(line[0] * rel[1] - line[1] * rel[0]) / dist2))
+    return np.array(out)
+
+
+@pytest.mark.parametrize("spread", [0.0, 0.1, 0.3])
+def test_lateral_spread_bounds_the_thermals_distance_from_the_line(spread: float) -> None:
+    """Thermals lie within spread x goal distance of the start-goal line, both draws; 0: on it."""
+    across = _line_fractions({"lateral_spread": spread, "n_thermals": (3, 5)}, 4)[:, 1]
+    assert across.max() <= spread + 1e-9
     if spread > 0:
-        assert max(offsets) > 0.5 * spread  # the whole band is used
+        assert across.max() > 0.5 * spread  # the whole band is used
 
 
 def test_default_lateral_spread_keeps_the_draws_bit_for_bit() -> None:
@@ -317,20 +322,9 @@ def test_default_lateral_spread_keeps_the_draws_bit_for_bit() -> None:
 def test_thermal_along_places_the_thermals_along_the_line(along: tuple[float, float]) -> None:
     """Thermals lie at ``thermal_along`` fractions of the goal distance along the start-goal line
     (projected on it), both draws; the whole range is used."""
-    kw = {"thermal_along": along, "n_thermals": (3, 5)}
-    batch = draw_scenario_arrays(np.random.default_rng(5), 64, **kw)
-    singles = [make_scenario(np.random.default_rng(i), **kw) for i in range(64)]
-    fractions = []
-    for i in range(len(batch)):
-        for sc in (batch.scenario(i), singles[i]):
-            s0 = np.array(sc.start[:2])
-            line = np.array([sc.goal.north, sc.goal.east]) - s0
-            dist2 = float(line @ line)
-            for t in sc.field.thermals:
-                f = float((np.array([t.north, t.east]) - s0) @ line) / dist2
-                assert along[0] - 1e-9 <= f <= along[1] + 1e-9
-                fractions.append(f)
-    assert max(fractions) - min(fractions) >= 0.8 * (along[1] - along[0])
+    f = _line_fractions({"thermal_along": along, "n_thermals": (3, 5)}, 5)[:, 0]
+    assert along[0] - 1e-9 <= f.min() and f.max() <= along[1] + 1e-9
+    assert f.max() - f.min() >= 0.8 * (along[1] - along[0])
 
 
 def test_default_thermal_along_keeps_the_draws_bit_for_bit() -> None:
