@@ -64,6 +64,7 @@ AGENT_NAMES = (
     "ppo-discrete",
     "ppo-masked",
     "ppo-continuous",
+    "ppo-grid",
     "heuristic",
     "heuristic-continuous",
     "thermalling",
@@ -80,7 +81,7 @@ REWARD_ONLY_KWARGS = (
     "settle_height",
 )
 #: PPO agent name -> training algorithm (see :data:`baselines.ppo.ALGOS`).
-PPO_AGENTS = {"ppo-discrete": "discrete", "ppo-masked": "masked", "ppo-continuous": "continuous"}
+PPO_AGENTS = {"ppo-discrete": "discrete", "ppo-masked": "masked", "ppo-continuous": "continuous", "ppo-grid": "grid"}
 
 
 @dataclass(frozen=True)
@@ -94,7 +95,7 @@ class EvalConfig:
     :param sst_iterations: SST iteration budget per planning call (None: time only). With a time
         budget the results depend on the machine's speed; an iteration budget alone is deterministic.
     :param ppo_dirs: PPO agent name -> run directory of :func:`baselines.ppo.train`.
-    :param ppo_model: ``"best"`` (best validation return during training) or ``"final"``.
+    :param ppo_model: ``"best"`` (best validation return during training), ``"final"`` or ``"bc"``.
     :param env_kwargs: extra ``gym.make`` keywords for every env (must match PPO training).
     :param keep_paths: store the flown path of every episode (for trajectory plots).
     """
@@ -128,8 +129,8 @@ class EvalConfig:
             raise ConfigError("agents and scenarios must not repeat")
         if self.sst_time_budget is None and self.sst_iterations is None:
             raise ConfigError("SST needs a budget: sst_time_budget and/or sst_iterations")
-        if self.ppo_model not in ("best", "final"):
-            raise ConfigError(f"ppo_model={self.ppo_model!r} is unknown; known: best, final")
+        if self.ppo_model not in ("best", "final", "bc"):
+            raise ConfigError(f"ppo_model={self.ppo_model!r} is unknown; known: best, final, bc")
 
 
 # --- names ----------------------------------------------------------------------------------------
@@ -171,8 +172,11 @@ def _file_digest(path: Path) -> str:
 
 
 def ppo_model_path(run_dir: str | Path, which: str = "best") -> Path:
-    """``best_model.zip`` (if ``which == "best"`` and it exists) or ``model.zip`` of a run directory."""
+    """``best_model.zip`` (if ``which == "best"`` and it exists), ``bc_model.zip`` (``"bc"``: the
+    behaviour-cloned start of a run with ``demos``) or ``model.zip`` of a run directory."""
     d = Path(run_dir)
+    if which == "bc":
+        return d / "bc_model.zip"
     best = d / "best_model.zip"
     if which == "best" and best.is_file():
         return best

@@ -1,10 +1,17 @@
 """PPO baselines: train stable-baselines3 ``PPO`` / sb3-contrib ``MaskablePPO`` on the soaring envs.
 
-Three algorithms share one code path (:data:`ALGOS`):
+Four algorithms share one code path (:data:`ALGOS`):
 
 * ``"discrete"`` -- PPO on ``soaring/Soaring-v0`` (174 primitives, no masks);
 * ``"masked"`` -- sb3-contrib ``MaskablePPO`` on the same env, with the env's ``action_masks()``;
-* ``"continuous"`` -- PPO with a Gaussian policy on ``soaring/SoaringContinuous-v0``.
+* ``"continuous"`` -- PPO with a Gaussian policy on ``soaring/SoaringContinuous-v0``;
+* ``"grid"`` -- PPO with a categorical policy on ``soaring/SoaringContinuous-v0`` over the
+  continuous reference search's control set (:func:`control_grid`: 5 airspeeds x 15 course changes
+  x the fixed path angles and the zero-thrust glide). Why: the reference plans a policy is cloned
+  from (:mod:`baselines.imitation`) circle in lift with 360, 540, 720 ... degree turns in either
+  direction, which cost about the same but leave on different headings; a Gaussian mean fitted to
+  them averages the modes (a 450-degree turn that leaves the thermal sideways), a categorical
+  policy keeps them apart.
 
 ``TrainConfig(task=...)`` picks the task (:data:`TASKS`): goal reaching (default), the thermal climb
 or cross-country (``soaring_env.env.tasks``), with validation on that task's scenario family.
@@ -42,12 +49,20 @@ from typing import Any, cast
 import gymnasium as gym
 import numpy as np
 
+from soaring_env._validation import ConfigError
 from soaring_env.scenario import HELDOUT_SEED0, Scenario, atomic_write_text, get_scenario
 
 DISCRETE_ID = "soaring/Soaring-v0"
 CONTINUOUS_ID = "soaring/SoaringContinuous-v0"
 #: Algorithm name -> env id it trains on (goal reaching).
-ALGOS: dict[str, str] = {"discrete": DISCRETE_ID, "masked": DISCRETE_ID, "continuous": CONTINUOUS_ID}
+ALGOS: dict[str, str] = {
+    "discrete": DISCRETE_ID,
+    "masked": DISCRETE_ID,
+    "continuous": CONTINUOUS_ID,
+    "grid": CONTINUOUS_ID,
+}
+#: The algorithms that fly the continuous env ids.
+CONTINUOUS_ALGOS = ("continuous", "grid")
 #: Task -> (env id of the primitive algorithms, env id of ``continuous``, scenario family).
 TASKS: dict[str, tuple[str, str, str]] = {
     "goal": (DISCRETE_ID, CONTINUOUS_ID, "random"),
@@ -70,10 +85,11 @@ def _module_qualified(env_id: str) -> str:
 class TrainConfig:
     """Everything that defines a training run; saved verbatim as ``config.json`` beside the model.
 
-    :param algo: ``"discrete"``, ``"masked"`` or ``"continuous"`` (see :data:`ALGOS`).
+    :param algo: ``"discrete"``, ``"masked"``, ``"continuous"`` or ``"grid"`` (see :data:`ALGOS`).
     :param task: ``"goal"`` (goal reaching, default), ``"climb"`` (thermal climb) or ``"xc"``
         (cross-country): the env ids of :data:`TASKS`; validation on that task's scenario family.
-    :param total_timesteps: environment steps (one primitive or control segment each) to train for.
+    :param total_timesteps: environment steps (one primitive or control segment each) to train for;
+        0 with ``demos``: behaviour cloning alone (``model.zip`` is then the cloned policy).
     :param max_minutes: wall-clock cap on training [min]; stops early, saving the model (None: no cap).
     :param n_envs: parallel environments; more give PPO more diverse scenarios per update.
     :param vec_env: ``"native"`` (default: the natively batched env, one rollout call per step for
@@ -90,7 +106,7 @@ class TrainConfig:
     :param clip_range: PPO ratio clip.
     :param ent_coef: entropy bonus; None: 0.03 for the 174-way discrete policies (with 0.01 they
         stalled at ~70 % validation success, never learning to climb to a higher goal), 0.01 for
-        the Gaussian policy.
+        the Gaussian and the grid policies.
     :param vf_coef: value-loss weight.
     :param max_grad_norm: gradient clipping.
     :param net_arch: hidden layers of the separate policy and value MLPs.
@@ -112,6 +128,20 @@ class TrainConfig:
         rewards (a critic that learnt "the goal costs 50" keeps a policy from trying it again), and
         a policy that had become nearly deterministic (std 0.02) would not explore the new task.
         None (default): fresh weights.
+    :param demos: a folder of reference-search files (``scripts/reference.py --out DIR``): before
+        PPO, the policy is fitted to their plans replayed through this run's env and the critic to
+        their returns (:mod:`baselines.imitation`, behaviour cloning), after ``init_from`` if both
+        are given; the fitted model is saved as ``bc_model.zip``. The env must fly the reference's
+        dynamics (the task's default duration and envelope); reward settings may differ. The
+        continuous policy's spread is then reset to ``log_std_init``. None (default): no cloning.
+    :param demo_mirror: continuous and grid: clone the mirror images of the plans too (east ->
+        -east, every turn reversed; :func:`baselines.imitation.with_mirror_images`).
+    :param demo_epochs: passes of the behaviour cloning over the demonstrations (0: none, e.g. to
+        rehearse the demonstrations of a policy that ``init_from`` cloned before).
+    :param demo_learning_rate: Adam step size of the behaviour cloning.
+    :param demo_rehearsal: with ``demos``: after every PPO update, this many minibatches of the
+        demonstrations are fitted again (the actor's log-likelihood, with PPO's own optimizer), so
+        that PPO improves on the cloned policy without forgetting it (0: PPO alone).
     :param eval_freq: evaluate every this many total timesteps.
     :param n_eval_scenarios: validation scenarios per evaluation (one episode each).
     :param checkpoint_freq: save a checkpoint every this many total timesteps (0: never).
@@ -145,6 +175,11 @@ class TrainConfig:
     turn_exponent: float = 3.0
     env_kwargs: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     init_from: str | None = None
+    demos: str | None = None
+    demo_mirror: bool = True
+    demo_epochs: int = 200
+    demo_learning_rate: float = 1e-3
+    demo_rehearsal: int = 0
     eval_freq: int = 25_000
     n_eval_scenarios: int = 40
     checkpoint_freq: int = 500_000
@@ -164,8 +199,8 @@ class TrainConfig:
         if self.vec_env == "native" and self.shaping:
             raise ValueError("shaping needs vec_env='dummy' or 'subproc' (GoalDistanceShaping wraps single envs)")
         for name in ("total_timesteps", "n_envs", "n_steps", "batch_size", "n_epochs", "n_eval_scenarios"):
-            if int(getattr(self, name)) < 1:
-                raise ValueError(f"{name}={getattr(self, name)!r} must be >= 1")
+            if int(getattr(self, name)) < (0 if name == "total_timesteps" and self.demos is not None else 1):
+                raise ValueError(f"{name}={getattr(self, name)!r} must be >= 1 (total_timesteps: 0 with demos)")
         if self.eval_freq < 1 or self.checkpoint_freq < 0:
             raise ValueError("eval_freq must be >= 1 and checkpoint_freq >= 0")
         if self.max_minutes is not None and not self.max_minutes > 0:
@@ -174,13 +209,28 @@ class TrainConfig:
             raise ValueError(f"gamma={self.gamma!r} must lie in (0, 1]")
         object.__setattr__(self, "net_arch", tuple(int(n) for n in self.net_arch))
         if self.ent_coef is None:
-            object.__setattr__(self, "ent_coef", 0.01 if self.algo == "continuous" else 0.03)
+            object.__setattr__(self, "ent_coef", 0.01 if self.algo in CONTINUOUS_ALGOS else 0.03)
         object.__setattr__(self, "env_kwargs", dict(self.env_kwargs))
         if self.init_from is not None:
             if not isinstance(self.init_from, (str, Path)):
                 raise ValueError(f"init_from={self.init_from!r} must be a run directory or .zip path (a string)")
             object.__setattr__(self, "init_from", str(self.init_from))
             _init_model_path(self.init_from)
+        if self.demos is not None:
+            if not isinstance(self.demos, (str, Path)) or not Path(self.demos).is_dir():
+                raise ValueError(f"demos={self.demos!r} must be a folder of reference files (scripts/reference.py)")
+            object.__setattr__(self, "demos", str(self.demos))
+        if isinstance(self.demo_rehearsal, bool) or not isinstance(self.demo_rehearsal, int) or self.demo_rehearsal < 0:
+            raise ValueError(f"demo_rehearsal={self.demo_rehearsal!r} must be an integer >= 0")
+        if self.demo_rehearsal and self.demos is None:
+            raise ValueError("demo_rehearsal needs demos")
+        if not isinstance(self.demo_mirror, bool):
+            raise ValueError(f"demo_mirror={self.demo_mirror!r} must be true or false")
+        if int(self.demo_epochs) < 0 or not 0.0 < float(self.demo_learning_rate) < 1.0:
+            raise ValueError(
+                f"demo_epochs={self.demo_epochs!r} must be >= 0 and "
+                f"demo_learning_rate={self.demo_learning_rate!r} in (0, 1)"
+            )
         if "scenario" in self.env_kwargs:
             raise ValueError("env_kwargs must not set 'scenario': training always draws random scenarios")
 
@@ -188,7 +238,7 @@ class TrainConfig:
     def env_id(self) -> str:
         """The env this algorithm trains on (the task's, :data:`TASKS`)."""
         discrete, continuous, _ = TASKS[self.task]
-        return continuous if self.algo == "continuous" else discrete
+        return continuous if self.algo in CONTINUOUS_ALGOS else discrete
 
     @property
     def family(self) -> str:
@@ -281,6 +331,10 @@ def body_frame(obs: np.ndarray, n_base: int = 11, n_thermal_features: int = 5) -
     return res.reshape(*o.shape[:-1], res.shape[-1])
 
 
+#: Observation entries that the mirror image (east -> -east) leaves as they are.
+_MIRROR_INVARIANT = frozenset({"cos_course", "height", "updraft", "edge_lift", "airspeed"})
+
+
 class BodyFrame:
     """:func:`body_frame` for any observation layout, found by the entries' names (``sin_course``,
     ``cos_course`` and every ``*_north`` / ``*_east`` pair: goal, wind, thermal slots); the goal's
@@ -323,6 +377,27 @@ class BodyFrame:
             )
         res = np.concatenate(parts, axis=1).astype(np.float32)
         return res.reshape(*o.shape[:-1], res.shape[-1])
+
+    def mirror_signs(self, names: Sequence[str]) -> np.ndarray:
+        """Signs that turn a transformed observation into that of the mirror-image world (east ->
+        -east, course chi -> -chi): the ``right`` half of every rotated pair, ``sin_course`` and the
+        goal bearing's sine flip, the rest stays. The model is mirror-symmetric (axisymmetric
+        thermals, no Coriolis), so a plan with every turn reversed is as good in the mirrored world.
+
+        :param names: the env's ``observation_names`` (those this transform was built from).
+        :raises ConfigError: an entry whose mirror image is not known (e.g. the sensed tiers).
+        """
+        names = list(names)
+        out = np.ones(self.size + (3 if self.goal is not None else 0), np.float32)
+        flips = {k for _, k in self.pairs} | {self.course[0]}
+        for i, n in enumerate(names):
+            if i in flips:
+                out[i] = -1.0
+            elif not (n in _MIRROR_INVARIANT or n.endswith(("_north", "_up", "_present", "_peak", "_radius"))):
+                raise ConfigError(f"observation entry {n!r} has no known mirror image; allowed: the goal layout")
+        if self.goal is not None:
+            out[self.size + 1] = -1.0  # sin(bearing - chi)
+        return out
 
     def space(self, space: gym.spaces.Box) -> gym.spaces.Box:
         """The observation space after the transform: rotated pairs widen by sqrt(2)."""
@@ -375,6 +450,14 @@ def turn_curve(action: Any, exponent: float) -> np.ndarray:
     return a
 
 
+def inverse_turn_curve(action: Any, exponent: float) -> np.ndarray:
+    """The policy action that :func:`turn_curve` maps to the env action ``action`` (turn channel
+    ``sign(a) |a|^(1/exponent)``; the others unchanged): how a reference plan is flown by a policy."""
+    a = np.array(action, dtype=np.float64, copy=True)
+    a[..., 1] = np.sign(a[..., 1]) * np.abs(a[..., 1]) ** (1.0 / float(exponent))
+    return a.astype(np.float32)
+
+
 class TurnCurveAction(gym.ActionWrapper):
     """Action wrapper applying :func:`turn_curve` (see there) before the continuous env."""
 
@@ -384,6 +467,49 @@ class TurnCurveAction(gym.ActionWrapper):
 
     def action(self, action: Any) -> np.ndarray:
         return turn_curve(np.clip(action, -1.0, 1.0), self.exponent)
+
+
+def control_grid(model: Any) -> np.ndarray:
+    """The ``"grid"`` policy's actions: the continuous reference search's control set on ``model``
+    (:func:`baselines.reference.control_set` with the default :class:`~baselines.reference.ReferenceConfig`),
+    as ``(M, 3)`` float32 normalized actions of the continuous env. The zero-thrust glide angles
+    in it hold up to the scenario's ceiling; every random scenario of the goal task shares one
+    ceiling (1,500 m), so a model of the env's default scenario gives the table of every episode."""
+    from baselines.reference import ReferenceConfig, control_set  # lazy: the SST core's kernels
+
+    return control_set(model, "continuous", ReferenceConfig()).astype(np.float32)
+
+
+def grid_index(table: np.ndarray, action: Any) -> int:
+    """The row of ``table`` (:func:`control_grid`) equal to the env ``action`` (to 1e-6): how a
+    reference plan's control is flown by the grid policy.
+
+    :raises ConfigError: no row matches (a plan of another control set)."""
+    d = np.max(np.abs(table - np.asarray(action, np.float32)[None, :]), axis=1)
+    k = int(np.argmin(d))
+    if not d[k] <= 1e-6:
+        raise ConfigError(
+            f"action={np.asarray(action).tolist()!r} is not in the control grid (nearest row {k}, off by {d[k]:.3g})"
+        )
+    return k
+
+
+class ControlGridAction(gym.ActionWrapper):
+    """``Discrete(M)`` actions over a continuous env: action ``k`` flies row ``k`` of
+    :func:`control_grid` (built from the env's own model)."""
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        self.table = control_grid(cast(Any, env.unwrapped).model)
+        self.action_space = gym.spaces.Discrete(len(self.table))
+
+    def action(self, action: Any) -> np.ndarray:
+        k = np.asarray(action)
+        if k.size != 1 or k.dtype.kind not in "iu" or not 0 <= int(k.item()) < len(self.table):
+            raise ConfigError(
+                f"action={action!r}; allowed: an integer in [0, {len(self.table) - 1}] (a control-grid row)"
+            )
+        return self.table[int(k.item())]
 
 
 class ScenarioCycle(gym.Wrapper):
@@ -423,9 +549,10 @@ def make_train_env(
     gamma: float = 0.99,
     body_frame: bool = True,
     turn_exponent: float = 1.0,
+    grid: bool = False,
 ) -> gym.Env:
     """One training env: random scenario at every reset, optional extra goal shaping and
-    body-frame observations.
+    body-frame observations (``grid``: :class:`ControlGridAction`; else the turn curve).
 
     Module-level (picklable) so that ``SubprocVecEnv`` workers can build it.
     """
@@ -434,13 +561,15 @@ def make_train_env(
     env = gym.make(_module_qualified(env_id), scenario="random", **dict(env_kwargs or {}))
     if shaping:
         env = GoalDistanceShaping(env, weight=shaping, gamma=gamma)
-    return _wrap_policy_io(env, body_frame, turn_exponent)
+    return _wrap_policy_io(env, body_frame, turn_exponent, grid)
 
 
-def _wrap_policy_io(env: gym.Env, body_frame: bool, turn_exponent: float) -> gym.Env:
+def _wrap_policy_io(env: gym.Env, body_frame: bool, turn_exponent: float, grid: bool) -> gym.Env:
     if body_frame:
         env = BodyFrameObservation(env)
-    if turn_exponent != 1.0 and isinstance(env.action_space, gym.spaces.Box):
+    if grid:
+        env = ControlGridAction(env)
+    elif turn_exponent != 1.0 and isinstance(env.action_space, gym.spaces.Box):
         env = TurnCurveAction(env, turn_exponent)
     return env
 
@@ -451,29 +580,41 @@ def make_native_train_env(
     env_kwargs: Mapping[str, Any] | None = None,
     body_frame: bool = True,
     turn_exponent: float = 1.0,
+    grid: bool = False,
 ) -> Any:
     """``n_envs`` training envs as one natively batched SB3 ``VecEnv`` (random scenario at every
     reset), with SB3's ``VecMonitor`` episode statistics and the same body-frame observations and
-    turn curve as :func:`make_train_env` -- the same transitions as SB3's ``DummyVecEnv`` over it."""
+    turn curve or control grid as :func:`make_train_env` -- the same transitions as SB3's
+    ``DummyVecEnv`` over it."""
     from stable_baselines3.common.vec_env import VecEnvWrapper, VecMonitor
 
     from soaring_env.env.sb3 import SoaringSB3VecEnv
 
     venv: Any = SoaringSB3VecEnv(n_envs, env_id=env_id, scenario="random", **dict(env_kwargs or {}))
     obs_fn = BodyFrame(venv.venv.template.observation_names) if body_frame else None
-    act_fn = None
-    if turn_exponent != 1.0 and isinstance(venv.action_space, gym.spaces.Box):
+    act_fn: Callable[[np.ndarray], np.ndarray] | None = None
+    act_space = None
+    if grid:
+        table = control_grid(venv.venv.template.model)
+        act_space = gym.spaces.Discrete(len(table))
+
+        def act_fn(a: np.ndarray) -> np.ndarray:
+            return table[np.asarray(a, np.int64).reshape(-1)]
+
+    elif turn_exponent != 1.0 and isinstance(venv.action_space, gym.spaces.Box):
         p = float(turn_exponent)
 
         def act_fn(a: np.ndarray) -> np.ndarray:
             return turn_curve(np.clip(a, -1.0, 1.0), p)
 
     class PolicyIO(VecEnvWrapper):  # type: ignore[misc]
-        """Batched :class:`BodyFrameObservation` / :class:`TurnCurveAction`."""
+        """Batched :class:`BodyFrameObservation` / :class:`TurnCurveAction` / :class:`ControlGridAction`."""
 
         def __init__(self, inner: Any) -> None:
             space = inner.observation_space
-            super().__init__(inner, observation_space=space if obs_fn is None else obs_fn.space(space))
+            super().__init__(
+                inner, observation_space=space if obs_fn is None else obs_fn.space(space), action_space=act_space
+            )
 
         def reset(self) -> np.ndarray:
             obs: Any = self.venv.reset()
@@ -500,12 +641,13 @@ def make_eval_env(
     env_kwargs: Mapping[str, Any] | None = None,
     body_frame: bool = True,
     turn_exponent: float = 1.0,
+    grid: bool = False,
 ) -> gym.Env:
     """One validation env cycling through ``scenarios`` (env reward only, no extra shaping)."""
     import soaring_env  # noqa: F401
 
     env: gym.Env = ScenarioCycle(gym.make(_module_qualified(env_id), **dict(env_kwargs or {})), scenarios)
-    return _wrap_policy_io(env, body_frame, turn_exponent)
+    return _wrap_policy_io(env, body_frame, turn_exponent, grid)
 
 
 def observation_transform(run_record: Mapping[str, Any]) -> Callable[[Any], Any] | None:
@@ -522,8 +664,15 @@ def observation_transform(run_record: Mapping[str, Any]) -> Callable[[Any], Any]
 
 
 def action_transform(run_record: Mapping[str, Any]) -> Callable[[Any], Any] | None:
-    """The action transform a saved continuous run was trained with (``config.json``), or None."""
+    """The action transform a saved continuous or grid run was trained with (``config.json``), or None."""
     cfg = run_record.get("config", run_record)
+    if cfg.get("algo") == "grid":
+        import soaring_env  # noqa: F401  (registers the ids)
+
+        env_kwargs = {k: v for k, v in dict(cfg.get("env_kwargs", {})).items() if k != "scenario"}
+        env = gym.make(_module_qualified(run_record.get("env_id", CONTINUOUS_ID)), **env_kwargs)
+        table = control_grid(cast(Any, env.unwrapped).model)
+        return lambda a: table[int(np.asarray(a).item())]
     p = float(cfg.get("turn_exponent", 1.0))
     if cfg.get("algo") != "continuous" or p == 1.0:
         return None
@@ -641,6 +790,33 @@ def _eval_callback(config: TrainConfig, eval_env: Any, out_dir: Path, t_start: f
     )
 
 
+def _rehearsal_callback(demos: Any, minibatches: int, batch_size: int, seed: int) -> Any:
+    """After every PPO update (at the next rollout's start), ``minibatches`` minibatches of
+    ``demos`` fitted with the policy's own optimizer (:func:`baselines.imitation.pretrain`)."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from baselines.imitation import pretrain, rows
+
+    class Rehearsal(BaseCallback):
+        def __init__(self) -> None:
+            super().__init__()
+            self.gen = np.random.default_rng(seed)
+            self.updates = 0
+
+        def _on_rollout_start(self) -> None:
+            if self.model.num_timesteps == 0:  # nothing learnt from the env yet
+                return
+            pick = self.gen.choice(len(demos), size=min(len(demos), minibatches * batch_size), replace=False)
+            pol = self.model.policy
+            pretrain(pol, rows(demos, pick), epochs=1, batch_size=batch_size, value_weight=0.0, optimizer=pol.optimizer)
+            self.updates += 1
+
+        def _on_step(self) -> bool:
+            return True
+
+    return Rehearsal()
+
+
 def _wall_clock_callback(max_minutes: float, t_start: float) -> Any:
     from stable_baselines3.common.callbacks import BaseCallback
 
@@ -717,6 +893,72 @@ def _init_policy_from(model: Any, init_from: str, log_std_init: float) -> None:
     pol.optimizer = pol.optimizer_class(pol.parameters(), lr=model.lr_schedule(1.0), **pol.optimizer_kwargs)
 
 
+def _clone_demos(model: Any, config: TrainConfig, out: Path) -> tuple[dict[str, Any], Any]:
+    """Behaviour cloning of ``config.demos`` into ``model`` (see :mod:`baselines.imitation`);
+    saves ``bc_model.zip`` and returns what was fitted (for ``config.json``) and the demonstrations."""
+    import torch
+
+    from baselines.imitation import demonstrations, pretrain, with_mirror_images
+
+    t0 = time.perf_counter()
+    p = config.turn_exponent
+    grid = config.algo == "grid"
+    probe = _probe(config)
+    flip = np.array([1.0, -1.0, 1.0], np.float32)  # the mirror image of a control: the turn reversed
+    to_policy_action: Callable[[Any], Any] | None = None
+    mirror_action: Callable[[np.ndarray], np.ndarray] = lambda a: a * flip  # noqa: E731
+    if grid:
+        table = control_grid(probe.model)
+        to_policy_action = lambda a: grid_index(table, a)  # noqa: E731
+        mirror_row = np.array([grid_index(table, r * flip) for r in table])
+        mirror_action = lambda a: mirror_row[a]  # noqa: E731
+    elif config.algo == "continuous" and p != 1.0:
+        to_policy_action = lambda a: inverse_turn_curve(a, p)  # noqa: E731  (odd in the turn: mirrors as is)
+    plans = demonstrations(
+        str(config.demos),
+        lambda sc: make_eval_env(config.env_id, [sc], config.env_kwargs, bool(config.body_frame), p, grid),
+        sampler="continuous" if config.algo in CONTINUOUS_ALGOS else "primitive",
+        gamma=config.gamma,
+        to_policy_action=to_policy_action,
+    )
+    mirrored = bool(config.demo_mirror and config.algo in CONTINUOUS_ALGOS)
+    demos = plans
+    if mirrored:
+        if not config.body_frame:
+            raise ValueError("demo_mirror needs body_frame=True (the mirror image is taken in the aircraft's frame)")
+        signs = BodyFrame(probe.observation_names).mirror_signs(probe.observation_names)
+        demos = with_mirror_images(plans, signs, mirror_action)
+    torch.manual_seed(config.seed)
+    losses: list[dict[str, float]] = []
+    if config.demo_epochs:
+        losses = pretrain(
+            model.policy, demos, epochs=config.demo_epochs, learning_rate=config.demo_learning_rate, seed=config.seed
+        )
+    model.save(str(out / "bc_model.zip"))
+    pol = model.policy
+    if hasattr(pol, "log_std"):
+        with torch.no_grad():
+            pol.log_std.fill_(config.log_std_init)
+    pol.optimizer = pol.optimizer_class(pol.parameters(), lr=model.lr_schedule(1.0), **pol.optimizer_kwargs)
+    print(
+        f"[{config.algo}] behaviour cloning: {len(demos)} steps of {len(plans.scenarios)} reference plans"
+        f"{' and their mirror images' if mirrored else ''}, "
+        f"{config.demo_epochs} epochs in {time.perf_counter() - t0:.0f} s"
+        + (f"; loss {losses[0]['nll']:.3f} -> {losses[-1]['nll']:.3f}" if losses else " (kept for rehearsal)"),
+        flush=True,
+    )
+    return {
+        "steps": len(demos),
+        "plans": len(plans.scenarios),
+        "mirrored": mirrored,
+        "mean_plan_cost": float(np.mean(plans.plan_costs)),
+        "scenarios": list(plans.scenarios),
+        "first_epoch": losses[0] if losses else None,
+        "last_epoch": losses[-1] if losses else None,
+        "seconds": round(time.perf_counter() - t0, 1),
+    }, demos
+
+
 def _init_model_path(init_from: str) -> Path:
     """The ``.zip`` of ``init_from`` (a run directory's ``model.zip``, or the file itself)."""
     p = Path(init_from)
@@ -752,11 +994,12 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
     }
     signals = _StopSignals().install()  # from here a SIGTERM or SIGINT ends the run gracefully
     atomic_write_text(out / "config.json", json.dumps(record, indent=2))
+    grid = config.algo == "grid"
     try:
         train_env: Any
         if config.vec_env == "native":
             train_env = make_native_train_env(
-                config.env_id, config.n_envs, config.env_kwargs, bool(config.body_frame), config.turn_exponent
+                config.env_id, config.n_envs, config.env_kwargs, bool(config.body_frame), config.turn_exponent, grid
             )
             train_env.seed(config.seed)  # as make_vec_env seeds: env i resets with seed + i
         else:
@@ -772,6 +1015,7 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
                     "gamma": config.gamma,
                     "body_frame": bool(config.body_frame),
                     "turn_exponent": config.turn_exponent,
+                    "grid": grid,
                 },
             )
         scenarios = validation_scenarios(
@@ -781,7 +1025,7 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
             [
                 lambda: Monitor(
                     make_eval_env(
-                        config.env_id, scenarios, config.env_kwargs, bool(config.body_frame), config.turn_exponent
+                        config.env_id, scenarios, config.env_kwargs, bool(config.body_frame), config.turn_exponent, grid
                     )
                 )
             ]
@@ -812,6 +1056,9 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
         )
         if config.init_from is not None:
             _init_policy_from(model, config.init_from, config.log_std_init)
+        if config.demos is not None:
+            record["behaviour_cloning"], demos = _clone_demos(model, config, out)
+            atomic_write_text(out / "config.json", json.dumps(record, indent=2))
         t_start = time.perf_counter()
         # the native training env and the validation env are different VecEnv classes, by design
         warnings.filterwarnings("ignore", message="Training and eval env are not of the same type")
@@ -827,6 +1074,8 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
             )
         if config.max_minutes is not None:
             callbacks.append(_wall_clock_callback(config.max_minutes, t_start))
+        if config.demo_rehearsal:
+            callbacks.append(_rehearsal_callback(demos, config.demo_rehearsal, config.batch_size, config.seed))
         progress = config.progress_bar
         if progress:
             try:
@@ -837,12 +1086,13 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
                 progress = False
         callbacks.append(signals.callback())
         try:
-            model.learn(
-                total_timesteps=config.total_timesteps,
-                callback=CallbackList(callbacks),
-                progress_bar=progress,
-                tb_log_name=config.algo,
-            )
+            if config.total_timesteps > 0:  # 0: behaviour cloning alone (demos)
+                model.learn(
+                    total_timesteps=config.total_timesteps,
+                    callback=CallbackList(callbacks),
+                    progress_bar=progress,
+                    tb_log_name=config.algo,
+                )
         finally:
             signals.restore()
             train_env.close()

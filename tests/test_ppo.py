@@ -77,9 +77,7 @@ def test_tiny_run_writes_the_run_directory(trained: dict[str, Path], algo: str) 
 @pytest.mark.parametrize("algo", list(ALGOS))
 def test_trained_agent_acts_through_the_agent_interface(trained: dict[str, Path], algo: str, tmp_path: Path) -> None:
     agent = PPOAgent(trained[algo])
-    assert isinstance(agent, Agent) and agent.name == {"discrete": "ppo-discrete", "masked": "ppo-masked"}.get(
-        algo, "ppo-continuous"
-    )
+    assert isinstance(agent, Agent) and agent.name == f"ppo-{algo}"
     env = gym.make(agent.env_id)
     obs, _ = env.reset(seed=0, options={"scenario": resolve_scenario("paper")})
     agent.reset(env, 0)

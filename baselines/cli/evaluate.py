@@ -58,7 +58,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--sst-iterations", type=int, default=None, help="SST iteration budget per planning call")
     p.add_argument("--ppo-root", default="results/ppo", help="where <algo>/model.zip runs live (default results/ppo)")
     p.add_argument("--ppo-dir", action="append", default=[], metavar="AGENT=DIR", help="e.g. ppo-masked=runs/x")
-    p.add_argument("--ppo-model", choices=["best", "final"], default="best", help="which saved PPO model to use")
+    p.add_argument(
+        "--ppo-model",
+        choices=["best", "final", "bc"],
+        default="best",
+        help="which saved PPO model to use (bc: the behaviour-cloned start of a run with demos)",
+    )
     p.add_argument(
         "--out",
         default="results/eval-local",

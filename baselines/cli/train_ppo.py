@@ -35,8 +35,9 @@ from baselines.backends import run_jobs
 from baselines.ppo import ALGOS, TASKS, VEC_ENVS, TrainConfig, plot_learning_curve, train
 from soaring_env._validation import ConfigError
 
-#: Wall-clock shares of ``--minutes`` for ``--algo all`` (masked PPO steps ~4x slower: the masks
-#: cost a batched rollout of all 174 primitives per step).
+#: The variants of ``--algo all`` and their wall-clock shares of ``--minutes`` (masked PPO steps ~4x
+#: slower: the masks cost a batched rollout of all 174 primitives per step). ``grid`` is trained on
+#: its own, from reference plans (``--set demos=...``).
 SHARES = {"masked": 0.4, "discrete": 0.3, "continuous": 0.3}
 
 
@@ -130,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
     multi = len(seeds) > 1
     workers = cli_workers(args, min(len(seeds), os.cpu_count() or 1))
 
-    algos = list(ALGOS) if args.algo == "all" else [args.algo]
+    algos = list(SHARES) if args.algo == "all" else [args.algo]
     # several seeds at a time: their progress bars would fight over the terminal
     overrides: dict[str, Any] = {"progress_bar": not args.no_progress and (not multi or workers == 1)}
     if args.task != "goal":

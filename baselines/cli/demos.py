@@ -1,0 +1,100 @@
+"""Demonstrations for behaviour cloning: reference plans on training scenarios, and (DAgger) from
+the states a trained policy visits.
+
+    # reference plans on random-20000 ... random-20199 (seeds disjoint from validation and held-out)
+    python scripts/demos.py --scenarios 200 --out results/reference-train
+    # a DAgger round: fly a run's policy on the same scenarios, plan again from every 4th state it visits
+    python scripts/demos.py --scenarios 200 --dagger results/ppo-bc/grid --every 4 --tag r1 \\
+        --out results/reference-train
+
+Then ``python scripts/train_ppo.py --algo grid --set 'demos="results/reference-train"'`` clones the
+plans into a policy before PPO (:mod:`baselines.imitation`). One JSON per plan, written atomically
+as soon as it is done (the reference search's own files: ``scripts/reference.py``); a rerun resumes
+and skips finished files with the same settings. A DAgger start ``<scenario>-<tag>s<k>`` is the
+state after the policy's k-th step, taken as the start of a copy of the scenario (the thermals as
+at time 0).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from pathlib import Path
+
+from baselines._runs import add_backend_args, check_cli_args, cli_workers
+from baselines.imitation import DEMO_SEED0, demo_reference_config, visited_starts
+from baselines.reference.runner import reference_table, run_references
+from soaring_env._validation import ConfigError
+from soaring_env.scenario import atomic_write_text, get_scenario
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point; returns the exit status."""
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--scenarios", type=int, default=200, help=f"training scenarios random-{DEMO_SEED0} ... (200)")
+    p.add_argument("--first", type=int, default=0, help="skip this many training scenarios (default 0)")
+    p.add_argument("--sampler", choices=["continuous", "primitive"], default="continuous", help="action set")
+    p.add_argument("--beam-width", type=int, default=125, help="the reference search's accuracy knob (125)")
+    p.add_argument("--dagger", default=None, metavar="RUN", help="plan from the states this PPO run visits")
+    p.add_argument("--ppo-model", choices=["best", "final", "bc"], default="final", help="which model of RUN")
+    p.add_argument("--every", type=int, default=4, help="with --dagger: every this many steps (default 4)")
+    p.add_argument("--tag", default="", help="with --dagger: marks the round in the names (<name>-<tag>s<k>)")
+    p.add_argument("--out", type=Path, default=Path("results/reference-train"), help="output directory")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_backend_args(p, "one per CPU core")
+    args = p.parse_args(argv)
+    check_cli_args(p, args, counts=("scenarios", "beam_width", "every", "workers"), dirs=("out",))
+    if args.first < 0:
+        p.error(f"--first={args.first} must be >= 0")
+    if not args.tag.isalnum() and args.tag != "":
+        p.error(f"--tag={args.tag!r}: letters and digits only")
+    try:
+        cfg = demo_reference_config(args.beam_width)
+        scenarios = [get_scenario(f"random-{DEMO_SEED0 + args.first + k}") for k in range(args.scenarios)]
+        if args.dagger is not None:
+            scenarios = _dagger_starts(args, scenarios)
+        t0 = time.perf_counter()
+        workers = cli_workers(args, os.cpu_count() or 1)
+        print(f"demonstrations: {len(scenarios)} reference searches ({args.sampler}, beam width {cfg.beam_width}) "
+              f"-> {args.out}", flush=True)  # fmt: skip
+        refs = run_references(
+            scenarios,
+            args.out,
+            samplers=(args.sampler,),
+            config=cfg,
+            workers=workers,
+            progress=not args.no_progress,
+            backend=args.backend,
+            address=args.address,
+        )
+    except ConfigError as exc:
+        p.error(str(exc))
+    from baselines.reference import load_references
+
+    everything = load_references(args.out)
+    atomic_write_text(args.out / "table.md", reference_table(everything, [args.sampler]) + "\n")
+    print(f"{len(refs)} plans in {time.perf_counter() - t0:.0f} s; {len(everything)} in {args.out} (table.md)")
+    return 0
+
+
+def _dagger_starts(args: argparse.Namespace, scenarios: list) -> list:
+    """The DAgger starts of ``args.dagger``'s policy on ``scenarios``."""
+    from baselines.agents import PPOAgent
+    from baselines.evaluation import make_env, ppo_env_kwargs, ppo_model_path
+
+    agent = PPOAgent(ppo_model_path(args.dagger, args.ppo_model))
+    kwargs = ppo_env_kwargs(agent.config)
+
+    def make(sc):  # type: ignore[no-untyped-def]
+        env = make_env(agent.env_id, {**kwargs, "scenario": sc})
+        agent.reset(env)
+        return env
+
+    starts = visited_starts(scenarios, make, lambda obs: agent.predict(obs)[0], every=args.every, tag=args.tag)
+    print(f"dagger: {len(starts)} states visited by {agent.model_path} on {len(scenarios)} scenarios", flush=True)
+    return starts
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,316 @@
+"""Behaviour cloning from the reference search: demonstrations that soar, for the PPO agents.
+
+PPO on the goal task finds the straight line within minutes and never the detour through a
+thermal (README, "Agents that learn to soar"): the climb pays only once it has been flown to the
+end, and random exploration around a straight-flying policy does not fly one. The reference search
+(:mod:`baselines.reference`) does: per scenario it returns a plan in the env's own action space
+(continuous ``[-1, 1]^3`` controls or primitive indices) that replays bit for bit through
+``env.step`` and circles in lift where that pays. This module turns such plans into a start for PPO:
+
+* :func:`demonstrations` replays every reference plan of a folder through the training env's
+  policy interface (body-frame observations, the inverse of the turn curve), recording the
+  policy's observation, the action that reproduces the plan's control, and the discounted
+  return-to-go of the training reward -- a replay that does not end in the goal is an error, since
+  the env then does not fly the dynamics the plans were searched in;
+* :func:`pretrain` fits the policy to the actions (negative log-likelihood of the policy's
+  distribution: least squares on the Gaussian mean with a learnt spread, cross-entropy over the
+  primitives) and the critic to the returns, by minibatch Adam.
+
+The demonstrations come from scenarios drawn with seeds of their own (``random-20000 ...``,
+:data:`DEMO_SEED0`), disjoint from the validation (5 000 ...) and held-out (10 000 ...) seeds, and
+are written by ``scripts/demos.py`` (:mod:`baselines.cli.demos`), which also runs the DAgger rounds.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, cast
+
+import gymnasium as gym
+import numpy as np
+
+from baselines.reference import ReferenceConfig, load_references
+from soaring_env._validation import ConfigError
+from soaring_env.scenario import Scenario
+
+#: Seed of the first training scenario of the demonstrations (``random-20000``).
+DEMO_SEED0 = 20_000
+
+
+def demo_reference_config(beam_width: int = 125) -> ReferenceConfig:
+    """The reference search of the demonstrations: the yardstick's search at a 16x narrower beam
+    (about 10 s a scenario instead of 3 min, on one core), iterative widening from the same width."""
+    return ReferenceConfig(beam_width=beam_width, start_width=min(beam_width, ReferenceConfig.start_width))
+
+
+@dataclass(frozen=True)
+class Demonstrations:
+    """Replayed reference plans, one row per env step.
+
+    :param observations: the policy's observations (after the training observation transform).
+    :param actions: the policy's actions that fly the plan (before the training action transform):
+        ``(N, A)`` float32 for the continuous envs, ``(N,)`` int64 primitive or control-grid indices.
+    :param returns: discounted return-to-go of the env reward from each row [reward units].
+    :param episode: index of the plan each row belongs to.
+    :param scenarios: the scenario names, in episode order.
+    :param plan_costs: the reference cost of each plan [J/kg].
+    """
+
+    observations: np.ndarray
+    actions: np.ndarray
+    returns: np.ndarray
+    episode: np.ndarray
+    scenarios: tuple[str, ...]
+    plan_costs: tuple[float, ...]
+
+    def __len__(self) -> int:
+        return int(self.observations.shape[0])
+
+
+def demonstrations(
+    reference_dir: str | Path,
+    make_env: Callable[[Scenario], gym.Env],
+    *,
+    sampler: str,
+    gamma: float,
+    to_policy_action: Callable[[Any], Any] | None = None,
+    names: Sequence[str] | None = None,
+) -> Demonstrations:
+    """Replay the ``sampler`` plans of every reference file in ``reference_dir`` through ``make_env``.
+
+    :param reference_dir: a folder of ``scripts/reference.py`` JSON files.
+    :param make_env: builds the training env (with its observation and action transforms) that
+        starts in a given scenario at its first reset.
+    :param sampler: ``"continuous"`` or ``"primitive"``: which plans, matching the env's actions.
+    :param gamma: the learner's discount (for the returns-to-go).
+    :param to_policy_action: the inverse of the training action transform (None: identity).
+    :param names: only these scenarios (default: all files, sorted by name).
+    :raises ConfigError: no usable plan, or a plan that does not reach the goal when replayed.
+    """
+    refs = load_references(reference_dir)
+    if not refs:
+        raise ConfigError(f"demos={str(reference_dir)!r}: no reference files there (run scripts/reference.py)")
+    chosen = sorted(refs) if names is None else list(names)
+    obs_rows: list[np.ndarray] = []
+    act_rows: list[Any] = []
+    ret_rows: list[np.ndarray] = []
+    ep_rows: list[np.ndarray] = []
+    used: list[str] = []
+    costs: list[float] = []
+    for name in chosen:
+        if name not in refs:
+            raise ConfigError(f"demos: no reference file for scenario {name!r} in {str(reference_dir)!r}")
+        ref = refs[name].samplers.get(sampler)
+        if ref is None or not math.isfinite(ref.best_cost) or not ref.actions:
+            continue
+        env = make_env(refs[name].scenario)
+        try:
+            obs, _ = env.reset(seed=0)
+            rewards: list[float] = []
+            info: dict[str, Any] = {}
+            terminated = truncated = False
+            for k, a in enumerate(ref.actions):
+                if terminated or truncated:
+                    raise ConfigError(
+                        f"demos: the {sampler} plan of {name!r} ends after {k} of {len(ref.actions)} steps "
+                        "when replayed: the env's dynamics differ from the reference search's"
+                    )
+                env_action: Any = int(a) if sampler == "primitive" else np.asarray(a, np.float32)
+                u = to_policy_action(env_action) if to_policy_action is not None else env_action
+                obs_rows.append(np.asarray(obs, np.float32))
+                act_rows.append(u)
+                obs, r, terminated, truncated, info = env.step(u)
+                rewards.append(float(r))
+        finally:
+            env.close()
+        if not (terminated and info.get("is_success")):
+            raise ConfigError(
+                f"demos: the {sampler} plan of {name!r} does not reach the goal when replayed in this env "
+                "(other duration, envelope or stall limit than the reference search?)"
+            )
+        g = np.empty(len(rewards))
+        acc = 0.0
+        for k in range(len(rewards) - 1, -1, -1):
+            acc = rewards[k] + gamma * acc
+            g[k] = acc
+        ret_rows.append(g)
+        ep_rows.append(np.full(len(rewards), len(used), np.int64))
+        used.append(name)
+        costs.append(float(ref.best_cost))
+    if not used:
+        raise ConfigError(f"demos={str(reference_dir)!r}: no {sampler} plan that reaches the goal")
+    if all(isinstance(a, (int, np.integer)) for a in act_rows):  # primitives, or control-grid rows
+        actions = np.asarray(act_rows, np.int64)
+    else:
+        actions = np.stack([np.asarray(a, np.float32) for a in act_rows])
+    return Demonstrations(
+        observations=np.stack(obs_rows),
+        actions=actions,
+        returns=np.concatenate(ret_rows).astype(np.float32),
+        episode=np.concatenate(ep_rows),
+        scenarios=tuple(used),
+        plan_costs=tuple(costs),
+    )
+
+
+def rows(demos: Demonstrations, index: np.ndarray) -> Demonstrations:
+    """The rows ``index`` of ``demos`` (the episode bookkeeping kept as it is)."""
+    return dataclasses.replace(
+        demos,
+        observations=demos.observations[index],
+        actions=demos.actions[index],
+        returns=demos.returns[index],
+        episode=demos.episode[index],
+    )
+
+
+def with_mirror_images(
+    demos: Demonstrations, obs_signs: np.ndarray, mirror_action: Callable[[np.ndarray], np.ndarray]
+) -> Demonstrations:
+    """``demos`` and their mirror images (east -> -east, every turn reversed): twice the rows.
+
+    The model is mirror-symmetric, so the mirror image of a reference plan is a plan of the mirrored
+    scenario with the same cost; a policy cloned from both circles a thermal on whichever side the
+    observation says, rather than on the side the search happened to break a tie.
+
+    :param obs_signs: per observation entry, +1 or -1 (:meth:`baselines.ppo.BodyFrame.mirror_signs`).
+    :param mirror_action: the policy actions of the mirrored plan, for a batch of actions.
+    """
+    signs = np.asarray(obs_signs, np.float32)
+    if signs.shape != demos.observations.shape[1:]:
+        raise ConfigError(f"obs_signs has shape {signs.shape}; expected {demos.observations.shape[1:]}")
+    return Demonstrations(
+        observations=np.concatenate([demos.observations, demos.observations * signs]),
+        actions=np.concatenate([demos.actions, np.asarray(mirror_action(demos.actions), demos.actions.dtype)]),
+        returns=np.concatenate([demos.returns, demos.returns]),
+        episode=np.concatenate([demos.episode, demos.episode + len(demos.scenarios)]),
+        scenarios=demos.scenarios + tuple(f"{n}~mirror" for n in demos.scenarios),
+        plan_costs=demos.plan_costs + demos.plan_costs,
+    )
+
+
+def visited_starts(
+    scenarios: Sequence[Scenario],
+    make_env: Callable[[Scenario], gym.Env],
+    act: Callable[[Any], Any],
+    *,
+    every: int,
+    tag: str = "",
+) -> list[Scenario]:
+    """The states a policy visits, as scenarios that start there (DAgger's data, Ross et al. 2011).
+
+    A cloned policy drifts from the plans it learnt from, into states no plan passes; searching
+    the reference again from those states (:func:`baselines.reference.runner.run_references`) gives
+    plans that correct the drift. Each scenario is flown once with ``act`` (deterministic), and the
+    state after every ``every``-th step (while the episode runs) becomes the start of a copy of the
+    scenario named ``<name>-<tag>s<step>``. The env's state is the scenario's start state
+    ``(Pn, Pe, chi, h)``, so a plan from such a start replays there exactly.
+
+    :param scenarios: where to fly.
+    :param make_env: the env (with the policy's transforms) starting in a given scenario.
+    :param act: policy observation -> policy action.
+    :param every: steps between recorded states (>= 1).
+    :param tag: marks a DAgger round in the names (the policies of two rounds visit other states).
+    """
+    if int(every) < 1:
+        raise ConfigError(f"every={every!r} must be >= 1")
+    out: list[Scenario] = []
+    for sc in scenarios:
+        env = make_env(sc)
+        try:
+            obs, _ = env.reset(seed=0)
+            k = 0
+            while True:
+                obs, _, terminated, truncated, _ = env.step(act(obs))
+                k += 1
+                if terminated or truncated:
+                    break
+                if k % every == 0:
+                    pn, pe, chi, h = (float(v) for v in np.asarray(cast(Any, env.unwrapped).state)[:4])
+                    try:
+                        out.append(dataclasses.replace(sc, start=(pn, pe, chi, h), name=f"{sc.name}-{tag}s{k}"))
+                    except ConfigError:  # inside the goal region or outside the domain: nothing to plan
+                        pass
+        finally:
+            env.close()
+    return out
+
+
+def pretrain(
+    policy: Any,
+    demos: Demonstrations,
+    *,
+    epochs: int,
+    learning_rate: float = 1e-3,
+    batch_size: int = 256,
+    value_weight: float = 0.5,
+    seed: int = 0,
+    optimizer: Any = None,
+) -> list[dict[str, float]]:
+    """Fit an SB3 ``ActorCriticPolicy`` to ``demos``: the actor by the negative log-likelihood of the
+    demonstrated actions, the critic by least squares on the returns-to-go.
+
+    By default the policy's own optimizer is left alone (a fresh Adam here, so that PPO's starts
+    clean); ``optimizer`` fits with a given one instead (PPO's, when rehearsing the demonstrations
+    between PPO updates). Deterministic for a fixed ``seed`` (minibatch order; torch on one thread).
+
+    :param policy: ``model.policy`` of a PPO / MaskablePPO model on the demonstrations' spaces.
+    :param epochs: passes over the demonstrations.
+    :param learning_rate: Adam step size.
+    :param batch_size: rows per minibatch.
+    :param value_weight: weight of the critic's loss beside the actor's.
+    :param seed: minibatch order.
+    :param optimizer: a torch optimizer over the policy's parameters (None: a fresh Adam).
+    :returns: per epoch the mean actor loss (``nll``), critic loss (``value_mse``) and, for
+        Gaussian policies, the mean absolute error of the mean action (``mae``).
+    """
+    import torch
+
+    if epochs < 1 or batch_size < 1:
+        raise ConfigError(f"pretrain: epochs={epochs!r} and batch_size={batch_size!r} must be >= 1")
+    obs = torch.as_tensor(demos.observations)
+    act = torch.as_tensor(demos.actions)
+    ret = torch.as_tensor(demos.returns)
+    opt = optimizer if optimizer is not None else torch.optim.Adam(policy.parameters(), lr=learning_rate)
+    gen = np.random.default_rng(seed)
+    n = len(demos)
+    log: list[dict[str, float]] = []
+    policy.set_training_mode(True)
+    for _ in range(int(epochs)):
+        order = gen.permutation(n)
+        sums = {"nll": 0.0, "value_mse": 0.0, "mae": 0.0}
+        for start in range(0, n, batch_size):
+            idx = torch.as_tensor(order[start : start + batch_size])
+            values, log_prob, _ = policy.evaluate_actions(obs[idx], act[idx])
+            nll = -log_prob.mean()
+            vloss = torch.mean((values.flatten() - ret[idx]) ** 2)
+            loss = nll + value_weight * vloss
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            w = len(idx)
+            sums["nll"] += float(nll.detach()) * w
+            sums["value_mse"] += float(vloss.detach()) * w
+            if act.dtype.is_floating_point:
+                with torch.no_grad():
+                    mean = policy.get_distribution(obs[idx]).distribution.mean
+                    sums["mae"] += float(torch.mean(torch.abs(mean - act[idx]))) * w
+        log.append({k: v / n for k, v in sums.items() if k != "mae" or act.dtype.is_floating_point})
+    policy.set_training_mode(False)
+    return log
+
+
+__all__ = [
+    "DEMO_SEED0",
+    "Demonstrations",
+    "demo_reference_config",
+    "demonstrations",
+    "pretrain",
+    "rows",
+    "visited_starts",
+    "with_mirror_images",
+]

@@ -1,0 +1,330 @@
+"""Behaviour cloning from reference plans: replay, returns-to-go, fitting, and the PPO hook."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+pytest.importorskip("stable_baselines3")
+
+import soaring_env  # noqa: F401  (registers the envs)
+from baselines.imitation import demonstrations, pretrain
+from baselines.ppo import (
+    CONTINUOUS_ID,
+    DISCRETE_ID,
+    TrainConfig,
+    inverse_turn_curve,
+    make_eval_env,
+    train,
+    turn_curve,
+)
+from baselines.reference import ReferenceConfig, compute_reference, save_reference
+from soaring_env._validation import ConfigError
+from soaring_env.physics.thermals import Thermal, WindField
+from soaring_env.scenario import Bounds, GoalRegion, Scenario
+
+#: Two small goal problems, a thermal on the way (a few primitives each).
+SCENARIOS = tuple(
+    Scenario(
+        field=WindField(thermals=(Thermal(north=500.0, east=60.0 * k, strength=2.5),), zi=1400.0, wind_east=1.0),
+        start=(0.0, 0.0, 0.0, 250.0 + 20.0 * k),
+        goal=GoalRegion(north=900.0, east=100.0, height=260.0, radius=120.0),
+        bounds=Bounds(-1200.0, 1800.0, -1200.0, 1200.0, 1500.0),
+        name=f"tiny-{k}",
+    )
+    for k in (0, 1)
+)
+
+
+@pytest.fixture(scope="module")
+def ref_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    d = tmp_path_factory.mktemp("refs")
+    for sc in SCENARIOS:
+        ref = compute_reference(
+            sc, ("primitive", "continuous"), ReferenceConfig(beam_width=20, start_width=20, max_edges=6)
+        )
+        save_reference(ref, d / f"{sc.name}.json")
+    return d
+
+
+def _env(env_id: str, exponent: float = 1.0, **kwargs: object):
+    return lambda sc: make_eval_env(env_id, [sc], dict(kwargs), True, exponent)
+
+
+@given(st.lists(st.floats(-1.0, 1.0, width=32), min_size=3, max_size=3), st.sampled_from([1.0, 2.0, 3.0, 5.0]))
+@settings(max_examples=200, deadline=None)
+def test_inverse_turn_curve_flies_the_env_action(a: list[float], p: float) -> None:
+    x = np.asarray(a, np.float32)
+    u = inverse_turn_curve(x, p)
+    assert np.all(np.abs(u) <= 1.0)
+    assert np.allclose(turn_curve(u, p), x, atol=2e-7)
+    assert u[0] == x[0] and u[2] == x[2]
+
+
+@pytest.mark.parametrize(("sampler", "env_id"), [("primitive", DISCRETE_ID), ("continuous", CONTINUOUS_ID)])
+def test_replayed_plans_reach_the_goal_and_sum_to_their_return(ref_dir: Path, sampler: str, env_id: str) -> None:
+    exponent = 3.0 if sampler == "continuous" else 1.0
+    inv = (lambda a: inverse_turn_curve(a, exponent)) if sampler == "continuous" else None
+    d1 = demonstrations(ref_dir, _env(env_id, exponent), sampler=sampler, gamma=1.0, to_policy_action=inv)
+    d9 = demonstrations(ref_dir, _env(env_id, exponent), sampler=sampler, gamma=0.9, to_policy_action=inv)
+    refs = {p.stem: json.loads(p.read_text()) for p in sorted(ref_dir.glob("*.json"))}
+    assert d1.scenarios == tuple(refs)
+    lengths = [len(refs[n]["samplers"][sampler]["actions"]) for n in d1.scenarios]
+    assert len(d1) == sum(lengths)
+    assert np.array_equal(np.bincount(d1.episode), lengths)
+    start = 0
+    for k, n in enumerate(lengths):
+        rows = slice(start, start + n)
+        # the returns-to-go: G_k = r_k + gamma G_{k+1}, ending at the goal
+        r = d1.returns[rows] - np.append(d1.returns[rows][1:], 0.0)
+        g9 = np.zeros(n)
+        acc = 0.0
+        for i in range(n - 1, -1, -1):
+            acc = r[i] + 0.9 * acc
+            g9[i] = acc
+        assert np.allclose(d9.returns[rows], g9, rtol=1e-5, atol=1e-4)
+        # the env's energy term of the return is the plan's cost (reward = -cost / 1 kJ/kg + shaping)
+        assert d1.plan_costs[k] == refs[d1.scenarios[k]]["samplers"][sampler]["best_cost"]
+        start += n
+    if sampler == "primitive":
+        assert d1.actions.dtype == np.int64
+        assert list(d1.actions[: lengths[0]]) == refs[d1.scenarios[0]]["samplers"][sampler]["actions"]
+    else:
+        assert np.allclose(
+            turn_curve(d1.actions, exponent),
+            np.concatenate([np.asarray(refs[s]["samplers"][sampler]["actions"], np.float32) for s in d1.scenarios]),
+            atol=2e-7,
+        )
+
+
+def test_other_dynamics_than_the_reference_are_refused(ref_dir: Path) -> None:
+    with pytest.raises(ConfigError, match="tiny-0"):
+        demonstrations(ref_dir, _env(CONTINUOUS_ID, duration=10.0), sampler="continuous", gamma=0.99)
+    with pytest.raises(ConfigError, match="no reference files"):
+        demonstrations(ref_dir / "none", _env(CONTINUOUS_ID), sampler="continuous", gamma=0.99)
+    with pytest.raises(ConfigError, match="tiny-7"):
+        demonstrations(ref_dir, _env(CONTINUOUS_ID), sampler="continuous", gamma=0.99, names=["tiny-7"])
+
+
+@pytest.mark.parametrize("algo", ["discrete", "continuous"])
+def test_cloning_fits_the_demonstrations(ref_dir: Path, algo: str, tmp_path: Path) -> None:
+    """A tiny set is learnt by heart: the policy's mode is the demonstrated action."""
+    import torch
+    from stable_baselines3 import PPO
+
+    env_id = CONTINUOUS_ID if algo == "continuous" else DISCRETE_ID
+    sampler = "continuous" if algo == "continuous" else "primitive"
+    demos = demonstrations(ref_dir, _env(env_id), sampler=sampler, gamma=0.99)
+    env = _env(env_id)(SCENARIOS[0])
+    torch.manual_seed(0)
+    model = PPO("MlpPolicy", env, seed=0, device="cpu", policy_kwargs={"net_arch": [64, 64]})
+    log = pretrain(model.policy, demos, epochs=1000, learning_rate=3e-3, seed=0)
+    assert log[-1]["nll"] < log[0]["nll"] and log[-1]["value_mse"] < log[0]["value_mse"]
+    pred, _ = model.predict(demos.observations, deterministic=True)
+    if algo == "discrete":
+        assert np.mean(pred == demos.actions) >= 0.95
+    else:
+        assert np.max(np.abs(np.clip(pred, -1, 1) - demos.actions)) < 0.05
+    # same seed, same fit, bit for bit
+    fits = []
+    for _ in range(2):
+        torch.manual_seed(0)
+        m = PPO("MlpPolicy", env, seed=0, device="cpu", policy_kwargs={"net_arch": [64, 64]})
+        fits.append((pretrain(m.policy, demos, epochs=3, seed=1), m.policy.state_dict()))
+    assert fits[0][0] == fits[1][0]
+    assert all(torch.equal(v, fits[1][1][k]) for k, v in fits[0][1].items())
+    env.close()
+
+
+def _tiny_run(algo: str, ref_dir: Path, **kwargs: object) -> TrainConfig:
+    """A training run of a few hundred steps that starts by cloning ``ref_dir``'s plans."""
+    return TrainConfig(
+        algo=algo,
+        total_timesteps=256,
+        n_envs=2,
+        n_steps=128,
+        batch_size=64,
+        n_epochs=1,
+        eval_freq=256,
+        n_eval_scenarios=2,
+        checkpoint_freq=0,
+        progress_bar=False,
+        demos=str(ref_dir),
+        **kwargs,  # type: ignore[arg-type]
+    )
+
+
+def test_train_with_demos_saves_the_cloned_start(ref_dir: Path, tmp_path: Path) -> None:
+    out = train(_tiny_run("continuous", ref_dir, demo_epochs=5), tmp_path / "run")
+    assert (out / "bc_model.zip").is_file() and (out / "model.zip").is_file()
+    bc = json.loads((out / "config.json").read_text())["behaviour_cloning"]
+    assert bc["plans"] == len(SCENARIOS) and bc["mirrored"] and bc["steps"] > 0 and bc["steps"] % 2 == 0
+    with pytest.raises(ValueError, match="demos"):
+        TrainConfig(demos=str(tmp_path / "nowhere"))
+    for bad in (-1, 1.5, True, "2"):
+        with pytest.raises(ValueError, match="demo_rehearsal"):
+            TrainConfig(demos=str(ref_dir), demo_rehearsal=bad)
+    with pytest.raises(ValueError, match="demo_rehearsal needs demos"):
+        TrainConfig(demo_rehearsal=2)
+    with pytest.raises(ValueError, match="demo_mirror"):
+        TrainConfig(demos=str(ref_dir), demo_mirror="yes")
+    with pytest.raises(ValueError, match="demo_epochs"):
+        TrainConfig(demo_epochs=0)
+
+
+def test_control_grid_is_the_reference_control_set_and_indexes_back() -> None:
+    """Every row of the grid is found again by ``grid_index`` (exhaustive); the wrapper flies it."""
+    import gymnasium as gym
+
+    from baselines.ppo import ControlGridAction, control_grid, grid_index
+    from baselines.reference import ReferenceConfig, control_set
+
+    env = ControlGridAction(gym.make(CONTINUOUS_ID))
+    table = control_grid(env.unwrapped.model)
+    assert np.array_equal(table, control_set(env.unwrapped.model, "continuous", ReferenceConfig()))
+    assert env.action_space == gym.spaces.Discrete(len(table)) and len(table) == 450
+    assert all(grid_index(table, row) == k for k, row in enumerate(table))
+    assert all(np.array_equal(env.action(np.int64(k)), table[k]) for k in (0, 17, len(table) - 1))
+    for bad in (-1, len(table), 2.5, "3", np.array([1, 2])):
+        with pytest.raises(ConfigError, match="control-grid row"):
+            env.action(bad)
+    with pytest.raises(ConfigError, match="not in the control grid"):
+        grid_index(table, table[0] + np.float32(0.01))
+    env.close()
+
+
+def test_grid_demonstrations_fly_the_plans_exactly(ref_dir: Path) -> None:
+    """The continuous plans replayed as grid indices give the same returns as the plain actions."""
+    import gymnasium as gym
+
+    from baselines.ppo import control_grid, grid_index
+
+    table = control_grid(gym.make(CONTINUOUS_ID).unwrapped.model)
+    plain = demonstrations(ref_dir, _env(CONTINUOUS_ID), sampler="continuous", gamma=0.99)
+    grid = demonstrations(
+        ref_dir,
+        lambda sc: make_eval_env(CONTINUOUS_ID, [sc], {}, True, 1.0, True),
+        sampler="continuous",
+        gamma=0.99,
+        to_policy_action=lambda a: grid_index(table, a),
+    )
+    assert grid.actions.dtype == np.int64 and np.array_equal(table[grid.actions], plain.actions)
+    assert np.array_equal(grid.returns, plain.returns) and np.array_equal(grid.observations, plain.observations)
+
+
+def test_grid_run_clones_trains_and_is_evaluated(ref_dir: Path, tmp_path: Path) -> None:
+    """``algo="grid"``: cloned start, PPO through the native env, then the evaluation's agent."""
+    import gymnasium as gym
+
+    from baselines.agents import PPOAgent
+    from baselines.evaluation import EvalConfig, agent_spec, ppo_model_path
+
+    cfg = _tiny_run("grid", ref_dir, demo_epochs=300, demo_learning_rate=3e-3, demo_rehearsal=1, net_arch=(64, 64))
+    out = train(cfg, tmp_path / "run")
+    assert json.loads((out / "config.json").read_text())["env_id"] == CONTINUOUS_ID
+    spec = agent_spec("ppo-grid", EvalConfig(agents=("ppo-grid",), ppo_dirs={"ppo-grid": str(out)}, ppo_model="bc"))
+    assert spec.env_id == CONTINUOUS_ID
+    # the cloned policy flies the first plan's opening control through the plain env
+    agent = PPOAgent(ppo_model_path(out, "bc"))
+    env = gym.make(CONTINUOUS_ID, scenario=SCENARIOS[0])
+    obs, _ = env.reset(seed=0)
+    agent.reset(env)
+    action, _ = agent.predict(obs)
+    assert env.action_space.contains(action)
+    ref = json.loads((ref_dir / "tiny-0.json").read_text())["samplers"]["continuous"]["actions"][0]
+    assert np.array_equal(action, np.asarray(ref, np.float32))
+    env.close()
+
+
+def test_dagger_starts_are_the_visited_states() -> None:
+    """Each start is the env state after the k-th step of the policy, named by round and step."""
+    import gymnasium as gym
+
+    from baselines.imitation import visited_starts
+
+    sc = SCENARIOS[0]
+    CIRCLE = np.array([0.0, 2.0 / 3.0, 0.0], np.float32)  # 720 degrees per step: stays near the start
+    starts = visited_starts([sc], lambda s: gym.make(CONTINUOUS_ID, scenario=s), lambda obs: CIRCLE, every=2, tag="r1")
+    env = gym.make(CONTINUOUS_ID, scenario=sc)
+    env.reset(seed=0)
+    states = []
+    for _ in range(6):
+        _, _, term, trunc, _ = env.step(CIRCLE)
+        states.append(tuple(float(v) for v in env.unwrapped.state[:4]))
+        if term or trunc:
+            break
+    assert len(starts) >= 3 and all(s.name.startswith("tiny-0-r1s") for s in starts)
+    assert [s.name for s in starts[:3]] == ["tiny-0-r1s2", "tiny-0-r1s4", "tiny-0-r1s6"]
+    assert [s.start for s in starts[:3]] == [states[1], states[3], states[5]]
+    with pytest.raises(ConfigError, match="every"):
+        visited_starts([sc], lambda s: gym.make(CONTINUOUS_ID, scenario=s), lambda obs: None, every=0)
+
+
+def test_mirror_images_are_the_plans_of_the_mirrored_scenarios(ref_dir: Path) -> None:
+    """Reversing every turn of a plan in the scenario mirrored east -> -east flies the mirror image:
+    the same rewards, and observations equal to the originals times ``mirror_signs``."""
+    import dataclasses
+
+    import gymnasium as gym
+
+    from baselines.imitation import with_mirror_images
+    from baselines.ppo import BodyFrame
+
+    names = gym.make(CONTINUOUS_ID).unwrapped.observation_names
+    signs = BodyFrame(names).mirror_signs(names)
+    demos = demonstrations(ref_dir, _env(CONTINUOUS_ID), sampler="continuous", gamma=0.99)
+    both = with_mirror_images(demos, signs, lambda a: a * np.array([1, -1, 1], np.float32))
+    assert len(both) == 2 * len(demos) and both.scenarios[len(demos.scenarios)] == "tiny-0~mirror"
+    refs = {p.stem: json.loads(p.read_text()) for p in sorted(ref_dir.glob("*.json"))}
+    for k, sc in enumerate(SCENARIOS):
+        f = sc.field
+        mirrored = dataclasses.replace(
+            sc,
+            field=dataclasses.replace(
+                f,
+                thermals=tuple(dataclasses.replace(t, east=-t.east) for t in f.thermals),
+                wind_east=-f.wind_east,
+            ),
+            goal=dataclasses.replace(sc.goal, east=-sc.goal.east),
+        )
+        env = _env(CONTINUOUS_ID)(mirrored)
+        obs, _ = env.reset(seed=0)
+        rows = np.flatnonzero(both.episode == len(demos.scenarios) + k)
+        for j, a in zip(rows, refs[sc.name]["samplers"]["continuous"]["actions"], strict=True):
+            assert np.allclose(obs, both.observations[j], atol=1e-5)
+            assert np.array_equal(both.actions[j], np.asarray(a, np.float32) * np.array([1, -1, 1], np.float32))
+            obs, *_ = env.step(both.actions[j])
+        env.close()
+    with pytest.raises(ConfigError, match="no known mirror image"):
+        BodyFrame([*names, "lift_left"]).mirror_signs([*names, "lift_left"])
+
+
+def test_demos_cli_plans_resumes_and_runs_a_dagger_round(
+    ref_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from baselines.cli.demos import main
+
+    out = tmp_path / "demos"
+    common = ["--beam-width", "8", "--workers", "1", "--no-progress", "--out", str(out)]
+    assert main(["--scenarios", "1", *common]) == 0
+    first = out / "random-20000.json"
+    stamp = first.stat().st_mtime_ns
+    assert main(["--scenarios", "1", *common]) == 0 and first.stat().st_mtime_ns == stamp  # resumed, not redone
+    run = train(_tiny_run("grid", ref_dir, demo_epochs=1), tmp_path / "run")
+    assert main(["--scenarios", "1", "--dagger", str(run), "--every", "3", "--tag", "r1", *common]) == 0
+    assert "states visited" in capsys.readouterr().out
+    starts = sorted(p.stem for p in out.glob("random-20000-r1s*.json"))
+    assert starts and all(int(s.rsplit("s", 1)[1]) % 3 == 0 for s in starts)
+    for bad, field in (
+        (["--scenarios", "0"], "--scenarios"),
+        (["--every", "0"], "--every"),
+        (["--tag", "a-b"], "--tag"),
+    ):
+        with pytest.raises(SystemExit) as exc:
+            main([*bad, *common])
+        assert exc.value.code == 2 and field in capsys.readouterr().err
