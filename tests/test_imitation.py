@@ -174,7 +174,7 @@ def test_train_with_demos_saves_the_cloned_start(ref_dir: Path, tmp_path: Path) 
     with pytest.raises(ValueError, match="demo_mirror"):
         TrainConfig(demos=str(ref_dir), demo_mirror="yes")
     with pytest.raises(ValueError, match="demo_epochs"):
-        TrainConfig(demo_epochs=0)
+        TrainConfig(demo_epochs=-1)
 
 
 def test_control_grid_is_the_reference_control_set_and_indexes_back() -> None:
@@ -328,3 +328,11 @@ def test_demos_cli_plans_resumes_and_runs_a_dagger_round(
         with pytest.raises(SystemExit) as exc:
             main([*bad, *common])
         assert exc.value.code == 2 and field in capsys.readouterr().err
+
+
+def test_rehearsal_without_a_cloning_pass(ref_dir: Path, tmp_path: Path) -> None:
+    """``demo_epochs=0``: the demonstrations are only rehearsed between PPO updates (as after
+    ``init_from`` a cloned run); the cloned start is then the initial policy."""
+    out = train(_tiny_run("grid", ref_dir, demo_epochs=0, demo_rehearsal=2, net_arch=(32, 32)), tmp_path / "run")
+    bc = json.loads((out / "config.json").read_text())["behaviour_cloning"]
+    assert bc["first_epoch"] is None and bc["last_epoch"] is None and bc["plans"] == len(SCENARIOS)
