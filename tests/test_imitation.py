@@ -324,6 +324,7 @@ def test_demos_cli_plans_resumes_and_runs_a_dagger_round(
         (["--scenarios", "0"], "--scenarios"),
         (["--every", "0"], "--every"),
         (["--tag", "a-b"], "--tag"),
+        (["--dagger", str(tmp_path / "nowhere")], "--dagger"),
     ):
         with pytest.raises(SystemExit) as exc:
             main([*bad, *common])

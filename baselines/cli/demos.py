@@ -53,7 +53,10 @@ def main(argv: list[str] | None = None) -> int:
         cfg = demo_reference_config(args.beam_width)
         scenarios = [get_scenario(f"random-{DEMO_SEED0 + args.first + k}") for k in range(args.scenarios)]
         if args.dagger is not None:
-            scenarios = _dagger_starts(args, scenarios)
+            try:
+                scenarios = _dagger_starts(args, scenarios)
+            except (FileNotFoundError, ValueError) as exc:  # no such run, or a run of another env
+                p.error(f"--dagger={args.dagger!r}: {exc}")
         t0 = time.perf_counter()
         workers = cli_workers(args, os.cpu_count() or 1)
         print(f"demonstrations: {len(scenarios)} reference searches ({args.sampler}, beam width {cfg.beam_width}) "
