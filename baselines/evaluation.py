@@ -82,6 +82,8 @@ REWARD_ONLY_KWARGS = (
 )
 #: PPO agent name -> training algorithm (see :data:`baselines.ppo.ALGOS`).
 PPO_AGENTS = {"ppo-discrete": "discrete", "ppo-masked": "masked", "ppo-continuous": "continuous", "ppo-grid": "grid"}
+#: Which saved model of a PPO run an agent uses (:func:`ppo_model_path`).
+PPO_MODELS = ("best", "final", "bc")
 
 
 @dataclass(frozen=True)
@@ -129,8 +131,8 @@ class EvalConfig:
             raise ConfigError("agents and scenarios must not repeat")
         if self.sst_time_budget is None and self.sst_iterations is None:
             raise ConfigError("SST needs a budget: sst_time_budget and/or sst_iterations")
-        if self.ppo_model not in ("best", "final", "bc"):
-            raise ConfigError(f"ppo_model={self.ppo_model!r} is unknown; known: best, final, bc")
+        if self.ppo_model not in PPO_MODELS:
+            raise ConfigError(f"ppo_model={self.ppo_model!r} is unknown; known: {', '.join(PPO_MODELS)}")
 
 
 # --- names ----------------------------------------------------------------------------------------

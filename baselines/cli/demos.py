@@ -23,6 +23,7 @@ import time
 from pathlib import Path
 
 from baselines._runs import add_backend_args, check_cli_args, cli_workers
+from baselines.evaluation import PPO_MODELS
 from baselines.imitation import DEMO_SEED0, demo_reference_config, visited_starts
 from baselines.reference.runner import reference_table, run_references
 from soaring_env._validation import ConfigError
@@ -37,7 +38,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--sampler", choices=["continuous", "primitive"], default="continuous", help="action set")
     p.add_argument("--beam-width", type=int, default=125, help="the reference search's accuracy knob (125)")
     p.add_argument("--dagger", default=None, metavar="RUN", help="plan from the states this PPO run visits")
-    p.add_argument("--ppo-model", choices=["best", "final", "bc"], default="final", help="which model of RUN")
+    p.add_argument("--ppo-model", choices=PPO_MODELS, default="final", help="which model of RUN")
     p.add_argument("--every", type=int, default=4, help="with --dagger: every this many steps (default 4)")
     p.add_argument("--tag", default="", help="with --dagger: marks the round in the names (<name>-<tag>s<k>)")
     p.add_argument("--out", type=Path, default=Path("results/reference-train"), help="output directory")

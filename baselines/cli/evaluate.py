@@ -29,6 +29,7 @@ from baselines._runs import add_backend_args, check_cli_args, cli_workers
 from baselines.evaluation import (
     AGENT_NAMES,
     PPO_AGENTS,
+    PPO_MODELS,
     EvalConfig,
     attach_regret,
     heldout_names,
@@ -60,7 +61,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--ppo-dir", action="append", default=[], metavar="AGENT=DIR", help="e.g. ppo-masked=runs/x")
     p.add_argument(
         "--ppo-model",
-        choices=["best", "final", "bc"],
+        choices=PPO_MODELS,
         default="best",
         help="which saved PPO model to use (bc: the behaviour-cloned start of a run with demos)",
     )
