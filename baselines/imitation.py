@@ -25,10 +25,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -113,6 +113,7 @@ def demonstrations(
             rewards: list[float] = []
             info: dict[str, Any] = {}
             terminated = truncated = False
+            first = int(ref.demo_from)  # a DAgger plan: the policy's own steps first, not imitated
             for k, a in enumerate(ref.actions):
                 if terminated or truncated:
                     raise ConfigError(
@@ -121,8 +122,9 @@ def demonstrations(
                     )
                 env_action: Any = int(a) if sampler == "primitive" else np.asarray(a, np.float32)
                 u = to_policy_action(env_action) if to_policy_action is not None else env_action
-                obs_rows.append(np.asarray(obs, np.float32))
-                act_rows.append(u)
+                if k >= first:
+                    obs_rows.append(np.asarray(obs, np.float32))
+                    act_rows.append(u)
                 obs, r, terminated, truncated, info = env.step(u)
                 rewards.append(float(r))
         finally:
@@ -137,8 +139,8 @@ def demonstrations(
         for k in range(len(rewards) - 1, -1, -1):
             acc = rewards[k] + gamma * acc
             g[k] = acc
-        ret_rows.append(g)
-        ep_rows.append(np.full(len(rewards), len(used), np.int64))
+        ret_rows.append(g[first:])
+        ep_rows.append(np.full(len(rewards) - first, len(used), np.int64))
         used.append(name)
         costs.append(float(ref.best_cost))
     if not used:
@@ -193,6 +195,30 @@ def with_mirror_images(
     )
 
 
+def _visits(
+    scenarios: Sequence[Scenario], make_env: Callable[[Scenario], gym.Env], act: Callable[[Any], Any], every: int
+) -> Iterator[tuple[Scenario, int, Any, list[Any]]]:
+    """Fly each scenario once with ``act``; after every ``every``-th step while the episode runs,
+    yield (scenario, step, the raw env, the actions so far)."""
+    if int(every) < 1:
+        raise ConfigError(f"every={every!r} must be >= 1")
+    for sc in scenarios:
+        env = make_env(sc)
+        try:
+            obs, _ = env.reset(seed=0)
+            taken: list[Any] = []
+            while True:
+                a = act(obs)
+                taken.append(a)
+                obs, _, terminated, truncated, _ = env.step(a)
+                if terminated or truncated:
+                    break
+                if len(taken) % every == 0:
+                    yield sc, len(taken), env.unwrapped, list(taken)
+        finally:
+            env.close()
+
+
 def visited_starts(
     scenarios: Sequence[Scenario],
     make_env: Callable[[Scenario], gym.Env],
@@ -208,7 +234,8 @@ def visited_starts(
     plans that correct the drift. Each scenario is flown once with ``act`` (deterministic), and the
     state after every ``every``-th step (while the episode runs) becomes the start of a copy of the
     scenario named ``<name>-<tag>s<step>``. The env's state is the scenario's start state
-    ``(Pn, Pe, chi, h)``, so a plan from such a start replays there exactly.
+    ``(Pn, Pe, chi, h)``, so a plan from such a start replays there exactly (from time 0, with a
+    fresh episode: for tasks with a battery use :func:`visited_prefixes`).
 
     :param scenarios: where to fly.
     :param make_env: the env (with the policy's transforms) starting in a given scenario.
@@ -216,28 +243,40 @@ def visited_starts(
     :param every: steps between recorded states (>= 1).
     :param tag: marks a DAgger round in the names (the policies of two rounds visit other states).
     """
-    if int(every) < 1:
-        raise ConfigError(f"every={every!r} must be >= 1")
     out: list[Scenario] = []
-    for sc in scenarios:
-        env = make_env(sc)
+    for sc, k, base, _ in _visits(scenarios, make_env, act, every):
+        pn, pe, chi, h = (float(v) for v in np.asarray(base.state)[:4])
         try:
-            obs, _ = env.reset(seed=0)
-            k = 0
-            while True:
-                obs, _, terminated, truncated, _ = env.step(act(obs))
-                k += 1
-                if terminated or truncated:
-                    break
-                if k % every == 0:
-                    pn, pe, chi, h = (float(v) for v in np.asarray(cast(Any, env.unwrapped).state)[:4])
-                    try:
-                        out.append(dataclasses.replace(sc, start=(pn, pe, chi, h), name=f"{sc.name}-{tag}s{k}"))
-                    except ConfigError:  # inside the goal region or outside the domain: nothing to plan
-                        pass
-        finally:
-            env.close()
+            out.append(dataclasses.replace(sc, start=(pn, pe, chi, h), name=f"{sc.name}-{tag}s{k}"))
+        except ConfigError:  # inside the goal region or outside the domain: nothing to plan
+            pass
     return out
+
+
+def visited_prefixes(
+    scenarios: Sequence[Scenario],
+    make_env: Callable[[Scenario], gym.Env],
+    act: Callable[[Any], Any],
+    *,
+    every: int,
+    tag: str = "",
+) -> list[tuple[Scenario, list[Any]]]:
+    """The states a policy visits, as the actions that reach them: DAgger for tasks whose state is
+    more than the position (the cross-country battery, the time).
+
+    Each scenario is flown once with ``act``; after every ``every``-th step (while the episode
+    runs) the actions so far become the prefix of a copy of the scenario named
+    ``<name>-<tag>s<step>`` (the same air and start): the task's reference search
+    (:func:`baselines.reference.tasks.task_reference`) flies the prefix, then plans from the state
+    it reaches with the battery, time and airspeed it has there.
+
+    :param make_env: the raw env (no policy transforms: the prefix is in env actions).
+    :param act: observation -> env action.
+    """
+    return [
+        (dataclasses.replace(sc, name=f"{sc.name}-{tag}s{k}"), taken)
+        for sc, k, _, taken in _visits(scenarios, make_env, act, every)
+    ]
 
 
 def pretrain(
@@ -311,6 +350,7 @@ __all__ = [
     "demonstrations",
     "pretrain",
     "rows",
+    "visited_prefixes",
     "visited_starts",
     "with_mirror_images",
 ]

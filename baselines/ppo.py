@@ -7,7 +7,8 @@ Four algorithms share one code path (:data:`ALGOS`):
 * ``"continuous"`` -- PPO with a Gaussian policy on ``soaring/SoaringContinuous-v0``;
 * ``"grid"`` -- PPO with a categorical policy on ``soaring/SoaringContinuous-v0`` over the
   continuous reference search's control set (:func:`control_grid`: 5 airspeeds x 15 course changes
-  x the fixed path angles and the zero-thrust glide). Why: the reference plans a policy is cloned
+  x the fixed path angles and the zero-thrust glide; cross-country: its own search's 4 x 7 x 2).
+  Why: the reference plans a policy is cloned
   from (:mod:`baselines.imitation`) circle in lift with 360, 540, 720 ... degree turns in either
   direction, which cost about the same but leave on different headings; a Gaussian mean fitted to
   them averages the modes (a 450-degree turn that leaves the thermal sideways), a categorical
@@ -192,6 +193,8 @@ class TrainConfig:
             raise ValueError(f"algo={self.algo!r} is unknown; known: {', '.join(ALGOS)}")
         if self.task not in TASKS:
             raise ValueError(f"task={self.task!r} is unknown; known: {', '.join(TASKS)}")
+        if self.algo == "grid" and self.task == "climb":
+            raise ValueError("algo='grid' needs a goal task (goal or xc): its controls are the goal search's")
         if self.body_frame is None:
             object.__setattr__(self, "body_frame", True)
         if self.vec_env not in VEC_ENVS:
@@ -332,7 +335,7 @@ def body_frame(obs: np.ndarray, n_base: int = 11, n_thermal_features: int = 5) -
 
 
 #: Observation entries that the mirror image (east -> -east) leaves as they are.
-_MIRROR_INVARIANT = frozenset({"cos_course", "height", "updraft", "edge_lift", "airspeed"})
+_MIRROR_INVARIANT = frozenset({"cos_course", "height", "updraft", "edge_lift", "airspeed", "battery", "time_left"})
 
 
 class BodyFrame:
@@ -394,7 +397,7 @@ class BodyFrame:
             if i in flips:
                 out[i] = -1.0
             elif not (n in _MIRROR_INVARIANT or n.endswith(("_north", "_up", "_present", "_peak", "_radius"))):
-                raise ConfigError(f"observation entry {n!r} has no known mirror image; allowed: the goal layout")
+                raise ConfigError(f"observation entry {n!r} has no known mirror image (sensed tiers)")
         if self.goal is not None:
             out[self.size + 1] = -1.0  # sin(bearing - chi)
         return out
@@ -469,15 +472,23 @@ class TurnCurveAction(gym.ActionWrapper):
         return turn_curve(np.clip(action, -1.0, 1.0), self.exponent)
 
 
-def control_grid(model: Any) -> np.ndarray:
-    """The ``"grid"`` policy's actions: the continuous reference search's control set on ``model``
-    (:func:`baselines.reference.control_set` with the default :class:`~baselines.reference.ReferenceConfig`),
-    as ``(M, 3)`` float32 normalized actions of the continuous env. The zero-thrust glide angles
-    in it hold up to the scenario's ceiling; every random scenario of the goal task shares one
-    ceiling (1,500 m), so a model of the env's default scenario gives the table of every episode."""
-    from baselines.reference import ReferenceConfig, control_set  # lazy: the SST core's kernels
+def control_grid(env: Any) -> np.ndarray:
+    """The ``"grid"`` policy's actions: the control set of the task's continuous reference search
+    (:func:`baselines.reference.control_set` with :func:`baselines.reference.tasks.reference_config`:
+    the yardstick's for goal reaching, the cross-country search's own for cross-country), as
+    ``(M, 3)`` float32 normalized actions of ``env`` (a continuous env of either task). The
+    zero-thrust glide angles in it hold up to the scenario's ceiling; every random scenario of a
+    task shares one ceiling, so the env's default scenario gives the table of every episode.
 
-    return control_set(model, "continuous", ReferenceConfig()).astype(np.float32)
+    :raises ConfigError: a task without a goal (the thermal climb's search has another control set).
+    """
+    from baselines.reference import ReferenceConfig, control_set  # lazy: the SST core's kernels
+    from baselines.reference.tasks import reference_config
+
+    cfg = reference_config(env)
+    if not isinstance(cfg, ReferenceConfig):
+        raise ConfigError(f"algo='grid' needs a goal task; {type(env.unwrapped).__name__} has no goal")
+    return control_set(env.unwrapped.model, "continuous", cfg).astype(np.float32)
 
 
 def grid_index(table: np.ndarray, action: Any) -> int:
@@ -500,7 +511,7 @@ class ControlGridAction(gym.ActionWrapper):
 
     def __init__(self, env: gym.Env) -> None:
         super().__init__(env)
-        self.table = control_grid(cast(Any, env.unwrapped).model)
+        self.table = control_grid(env)
         self.action_space = gym.spaces.Discrete(len(self.table))
 
     def action(self, action: Any) -> np.ndarray:
@@ -595,7 +606,7 @@ def make_native_train_env(
     act_fn: Callable[[np.ndarray], np.ndarray] | None = None
     act_space = None
     if grid:
-        table = control_grid(venv.venv.template.model)
+        table = control_grid(venv.venv.template)
         act_space = gym.spaces.Discrete(len(table))
 
         def act_fn(a: np.ndarray) -> np.ndarray:
@@ -671,7 +682,7 @@ def action_transform(run_record: Mapping[str, Any]) -> Callable[[Any], Any] | No
 
         env_kwargs = {k: v for k, v in dict(cfg.get("env_kwargs", {})).items() if k != "scenario"}
         env = gym.make(_module_qualified(run_record.get("env_id", CONTINUOUS_ID)), **env_kwargs)
-        table = control_grid(cast(Any, env.unwrapped).model)
+        table = control_grid(env)
         return lambda a: table[int(np.asarray(a).item())]
     p = float(cfg.get("turn_exponent", 1.0))
     if cfg.get("algo") != "continuous" or p == 1.0:
@@ -908,7 +919,7 @@ def _clone_demos(model: Any, config: TrainConfig, out: Path) -> tuple[dict[str, 
     to_policy_action: Callable[[Any], Any] | None = None
     mirror_action: Callable[[np.ndarray], np.ndarray] = lambda a: a * flip  # noqa: E731
     if grid:
-        table = control_grid(probe.model)
+        table = control_grid(probe)
         to_policy_action = lambda a: grid_index(table, a)  # noqa: E731
         mirror_row = np.array([grid_index(table, r * flip) for r in table])
         mirror_action = lambda a: mirror_row[a]  # noqa: E731

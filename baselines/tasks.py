@@ -13,10 +13,8 @@ predicted energy and the env's agree bit for bit, which :func:`run_task_job` che
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import statistics
-import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,8 +26,7 @@ import numpy as np
 from baselines._runs import read_json
 from baselines.agents import HeuristicAgent, PPOAgent, RandomAgent, ReplayAgent, ThermallingAgent
 from baselines.evaluation import bootstrap_ci, median_circling, ppo_env_kwargs, run_episode
-from baselines.reference.beam import ReferenceConfig, search
-from baselines.reference.horizon import HorizonConfig, energy_search
+from baselines.reference.tasks import DEFAULT_BEAM_WIDTH, REFERENCE_VERSION, reference_plan
 from soaring_env._validation import ConfigError, check_choice
 from soaring_env.scenario import get_scenario, heldout_names
 
@@ -41,22 +38,13 @@ TASK_FAMILIES = {
     "soaring/CrossCountryContinuous-v0": "xc",
 }
 AGENTS = ("reference", "heuristic", "thermalling", "direct", "random")
-#: The label of a trained PPO run's rows (``task_jobs(ppo_runs=...)``).
+#: The label of a trained PPO run's rows (``task_jobs(ppo_runs=...)``): ``"ppo"`` for PPO-continuous,
+#: ``"ppo-<algo>"`` for the others (:func:`ppo_label`).
 PPO = "ppo"
+#: Every label a PPO run's rows can carry, in table order.
+PPO_LABELS = (PPO, f"{PPO}-grid", f"{PPO}-discrete", f"{PPO}-masked")
 #: The scenario whose flown paths the results keep (the trajectories figure's), per family.
 FIGURE_SCENARIO = {"climb": "climb-10000", "xc": "xc-10000"}
-#: Beam width of the tasks' reference searches (the accuracy knob; ``--beam-width``).
-DEFAULT_BEAM_WIDTH = 500
-#: The cross-country reference's continuous control set for Ts = 10 s: the beam's grid of airspeeds
-#: [m/s] x course changes per step [deg] (clipped to the bank and stall limits), level and at the
-#: zero-thrust glide angle; and the ranking's progress weight (see ReferenceConfig.progress_weight).
-XC_SPEEDS = (12.5, 15.0, 18.0, 22.0)
-XC_TURNS_DEG = (-300.0, -150.0, -60.0, 0.0, 60.0, 150.0, 300.0)
-XC_PROGRESS_WEIGHT = 0.5
-#: First beam width of the cross-country reference's iterative widening (then doubled up to the knob).
-XC_START_WIDTH = 125
-#: Bumped when the tasks' reference settings change (records of another version are redone).
-REFERENCE_VERSION = 2
 #: Bumped when the agents' episode records gain fields (2: circling fractions) or an agent's rule
 #: changes: their records of another version are redone (the reference's cost minutes; they are not).
 RECORD_VERSION = 2
@@ -71,7 +59,7 @@ class TaskJob:
     agent: str
     seed: int
     beam_width: int = DEFAULT_BEAM_WIDTH
-    #: the PPO run directory (agent ``"ppo"``; its ``model.zip`` and ``config.json``)
+    #: the PPO run directory (agents of :data:`PPO_LABELS`; its ``model.zip`` and ``config.json``)
     run: str = ""
 
     def key(self) -> str:
@@ -81,7 +69,7 @@ class TaskJob:
         """What makes a finished record current (a rerun redoes records made otherwise)."""
         if self.agent == "reference":
             return {"beam_width": self.beam_width, "reference_version": REFERENCE_VERSION}
-        if self.agent == PPO:
+        if self.agent in PPO_LABELS:
             model = Path(self.run) / "model.zip"
             mtime = model.stat().st_mtime if model.exists() else None
             return {"run": self.run, "model_mtime": mtime, "record_version": RECORD_VERSION}
@@ -95,22 +83,26 @@ def task_jobs(
     beam_width: int = DEFAULT_BEAM_WIDTH,
     ppo_runs: Sequence[str] = (),
 ) -> list[TaskJob]:
-    """Every (task id, held-out scenario, agent) job, seed 0; each PPO run directory adds agent
-    ``"ppo"`` on the task id it was trained on (its ``config.json``)."""
+    """Every (task id, held-out scenario, agent) job, seed 0; each PPO run directory adds an agent
+    (:func:`ppo_label`) on the task id it was trained on (its ``config.json``)."""
     for e in env_ids:
         check_choice("env_id", e, tuple(TASK_FAMILIES))
     for a in agents:
         check_choice("agent", a, AGENTS)
-    runs: dict[str, str] = {}
+    runs: dict[str, dict[str, str]] = {}  # env id -> label -> run
     for r in ppo_runs:
         cfg = Path(r) / "config.json"
         if not cfg.is_file():
             raise ConfigError(f"ppo run {r!r} has no config.json; give a directory written by scripts/train_ppo.py")
-        env_id = str(read_json(cfg, "PPO run configuration").get("env_id"))
+        record = read_json(cfg, "PPO run configuration")
+        env_id = str(record.get("env_id"))
         check_choice(f"the env id of ppo run {r!r}", env_id, tuple(TASK_FAMILIES))
-        if env_id in runs:
-            raise ConfigError(f"two ppo runs for {env_id}: {runs[env_id]!r} and {r!r}; give one per task id")
-        runs[env_id] = str(r)
+        label = ppo_label(record)
+        if label in runs.get(env_id, {}):
+            raise ConfigError(
+                f"two {label} runs for {env_id}: {runs[env_id][label]!r} and {r!r}; give one per task id and algo"
+            )
+        runs.setdefault(env_id, {})[label] = str(r)
     jobs = []
     for env_id in env_ids:
         fam = TASK_FAMILIES[env_id]
@@ -119,48 +111,23 @@ def task_jobs(
                 if agent == "direct" and fam != "xc":
                     continue  # no goal to fly to
                 jobs.append(TaskJob(env_id, sc, agent, 0, beam_width))
-            if env_id in runs:
-                jobs.append(TaskJob(env_id, sc, PPO, 0, beam_width, runs[env_id]))
+            for label, run in runs.get(env_id, {}).items():
+                jobs.append(TaskJob(env_id, sc, label, 0, beam_width, run))
     return jobs
 
 
-def reference_config(env: gym.Env, beam_width: int) -> HorizonConfig | ReferenceConfig:
-    """The reference search settings of a task env."""
-    base: Any = env.unwrapped
-    if not base.has_goal:
-        return HorizonConfig(beam_width=beam_width)
-    steps = int(round(base.config.time_limit / base.library.duration))
-    # iterative widening from a fixed first width: the best plan can only improve as the knob doubles
-    kw: dict[str, Any] = {"beam_width": beam_width, "start_width": min(XC_START_WIDTH, beam_width), "max_edges": steps}
-    if base.continuous:
-        kw.update(speeds=XC_SPEEDS, turns_deg=XC_TURNS_DEG, gammas_deg=(0.0,))
-    return ReferenceConfig(**kw, progress_weight=XC_PROGRESS_WEIGHT)
-
-
-def reference_plan(env: gym.Env, beam_width: int) -> tuple[list[Any], dict[str, Any]]:
-    """The reference search's plan for the scenario ``env`` was just reset to: (env actions, stats)."""
-    base: Any = env.unwrapped
-    sampler = "continuous" if base.continuous else "primitive"
-    cfg = reference_config(env, beam_width)
-    t0 = time.perf_counter()
-    stats: dict[str, Any]
-    if isinstance(cfg, HorizonConfig):
-        r = energy_search(base.model, sampler, base.config.time_limit, cfg)
-        actions = list(r.actions)
-        predicted = r.energy
-        stats = {"rollouts": r.rollouts, "n_controls": r.n_controls, "found": math.isfinite(r.energy)}
-    else:
-        s = search(base.model, sampler, cfg, battery=base.battery)
-        actions = list(s.plan.actions)
-        predicted = -s.cost
-        stats = {"rollouts": s.rollouts, "n_controls": s.n_controls, "found": bool(s.plan.solved)}
-    stats.update(seconds=time.perf_counter() - t0, predicted_energy=predicted, settings=dataclasses.asdict(cfg))
-    return actions, stats
+def ppo_label(run_record: Mapping[str, Any]) -> str:
+    """The rows' label of a PPO run (its ``config.json``): ``"ppo"`` (continuous) or ``"ppo-<algo>"``."""
+    algo = str(run_record.get("algo", run_record.get("config", {}).get("algo", "continuous")))
+    label = PPO if algo == "continuous" else f"{PPO}-{algo}"
+    check_choice("the algo of a ppo run", label, PPO_LABELS)
+    return label
 
 
 def run_task_job(job: TaskJob) -> dict[str, Any]:
     """One episode record (see the module docstring); module level, so it runs in worker processes."""
-    own = ppo_env_kwargs(read_json(Path(job.run) / "config.json", "PPO run configuration")) if job.agent == PPO else {}
+    is_ppo = job.agent in PPO_LABELS
+    own = ppo_env_kwargs(read_json(Path(job.run) / "config.json", "PPO run configuration")) if is_ppo else {}
     env = gym.make(job.env_id, **own)
     sc = get_scenario(job.scenario)
     base: Any = env.unwrapped
@@ -179,8 +146,8 @@ def run_task_job(job: TaskJob) -> dict[str, Any]:
         agent = ThermallingAgent()
     elif job.agent == "direct":
         agent = HeuristicAgent(lift_threshold=math.inf, name="direct")  # never circles
-    elif job.agent == PPO:
-        agent = PPOAgent(job.run, name=PPO)
+    elif is_ppo:
+        agent = PPOAgent(job.run, name=job.agent)
     else:
         agent = RandomAgent()
     # flown points only for the first held-out scenario of each id (the figure's): files stay small
@@ -219,7 +186,7 @@ def summarize(episodes: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     }
     rows = []
     for env_id in TASK_FAMILIES:
-        for agent in (*AGENTS, PPO):
+        for agent in (*AGENTS, *PPO_LABELS):
             eps = [e for e in episodes if e["env_id"] == env_id and e["agent"] == agent]
             if not eps:
                 continue

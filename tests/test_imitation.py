@@ -23,7 +23,7 @@ from baselines.ppo import (
     train,
     turn_curve,
 )
-from baselines.reference import ReferenceConfig, compute_reference, save_reference
+from baselines.reference import ReferenceConfig, compute_reference, load_reference, save_reference
 from soaring_env._validation import ConfigError
 from soaring_env.physics.thermals import Thermal, WindField
 from soaring_env.scenario import Bounds, GoalRegion, Scenario
@@ -185,7 +185,7 @@ def test_control_grid_is_the_reference_control_set_and_indexes_back() -> None:
     from baselines.reference import ReferenceConfig, control_set
 
     env = ControlGridAction(gym.make(CONTINUOUS_ID))
-    table = control_grid(env.unwrapped.model)
+    table = control_grid(env)
     assert np.array_equal(table, control_set(env.unwrapped.model, "continuous", ReferenceConfig()))
     assert env.action_space == gym.spaces.Discrete(len(table)) and len(table) == 450
     assert all(grid_index(table, row) == k for k, row in enumerate(table))
@@ -204,7 +204,7 @@ def test_grid_demonstrations_fly_the_plans_exactly(ref_dir: Path) -> None:
 
     from baselines.ppo import control_grid, grid_index
 
-    table = control_grid(gym.make(CONTINUOUS_ID).unwrapped.model)
+    table = control_grid(gym.make(CONTINUOUS_ID))
     plain = demonstrations(ref_dir, _env(CONTINUOUS_ID), sampler="continuous", gamma=0.99)
     grid = demonstrations(
         ref_dir,
@@ -320,11 +320,16 @@ def test_demos_cli_plans_resumes_and_runs_a_dagger_round(
     assert "states visited" in capsys.readouterr().out
     starts = sorted(p.stem for p in out.glob("random-20000-r1s*.json"))
     assert starts and all(int(s.rsplit("s", 1)[1]) % 3 == 0 for s in starts)
+    xc_out = tmp_path / "xc"
+    assert main(["--task", "xc", "--scenarios", "1", *common[:-1], str(xc_out)]) == 0  # the task's own search
+    xc_ref = load_reference(xc_out / "xc-20000.json")
+    assert set(xc_ref.samplers) == {"continuous"} and xc_ref.samplers["continuous"].settings["progress_weight"] > 0
     for bad, field in (
         (["--scenarios", "0"], "--scenarios"),
         (["--every", "0"], "--every"),
         (["--tag", "a-b"], "--tag"),
         (["--dagger", str(tmp_path / "nowhere")], "--dagger"),
+        (["--task", "xc", "--dagger", str(run)], "--dagger"),  # a mid-flight start would get a fresh battery
     ):
         with pytest.raises(SystemExit) as exc:
             main([*bad, *common])
@@ -337,3 +342,95 @@ def test_rehearsal_without_a_cloning_pass(ref_dir: Path, tmp_path: Path) -> None
     out = train(_tiny_run("grid", ref_dir, demo_epochs=0, demo_rehearsal=2, net_arch=(32, 32)), tmp_path / "run")
     bc = json.loads((out / "config.json").read_text())["behaviour_cloning"]
     assert bc["first_epoch"] is None and bc["last_epoch"] is None and bc["plans"] == len(SCENARIOS)
+
+
+#: A small cross-country problem: a thermal on the way to a goal 4 km off (a glide reaches it too).
+XC_TINY = Scenario(
+    field=WindField(thermals=(Thermal(north=1500.0, east=0.0, strength=3.0),), zi=1400.0, wind_east=1.0),
+    start=(0.0, 0.0, 0.0, 250.0),
+    goal=GoalRegion(north=4000.0, east=200.0, height=300.0, radius=300.0),
+    bounds=Bounds(-2000.0, 6000.0, -3000.0, 3000.0, 1500.0),
+    name="xc-tiny",
+)
+
+
+def test_cross_country_plans_clone_into_the_grid_policy(tmp_path: Path) -> None:
+    """The cross-country reference (its own control set and battery) writes a reference file whose
+    plan replays through the grid policy's env to the goal; the grid is that search's control set,
+    closed under mirroring; the thermal climb has no grid."""
+    import math
+
+    import gymnasium as gym
+
+    from baselines.ppo import control_grid, grid_index
+    from baselines.reference import control_set
+    from baselines.reference.tasks import reference_config, task_reference
+
+    xc = "soaring/CrossCountryContinuous-v0"
+    ref = task_reference(xc, XC_TINY, beam_width=16)
+    plan = ref.samplers["continuous"]
+    assert math.isfinite(plan.best_cost) and math.isnan(plan.direct_cost) and plan.actions
+    save_reference(ref, tmp_path / "xc-tiny.json")
+    env = gym.make(xc)
+    table = control_grid(env)
+    assert np.array_equal(table, control_set(env.unwrapped.model, "continuous", reference_config(env)))
+    assert len(table) == 4 * 7 * 2  # airspeeds x course changes x (level, zero-thrust glide)
+    flip = np.array([1.0, -1.0, 1.0], np.float32)
+    assert sorted(grid_index(table, r * flip) for r in table) == list(range(len(table)))
+    demos = demonstrations(
+        tmp_path,
+        lambda sc: make_eval_env(xc, [sc], {}, True, 1.0, True),
+        sampler="continuous",
+        gamma=0.99,
+        to_policy_action=lambda a: grid_index(table, a),
+    )
+    assert demos.actions.dtype == np.int64 and len(demos) == len(plan.actions)
+    assert np.array_equal(table[demos.actions], np.asarray(plan.actions, np.float32))
+    with pytest.raises(ConfigError, match="needs a goal task"):
+        control_grid(gym.make("soaring/ThermalClimbContinuous-v0"))
+    with pytest.raises(ValueError, match="needs a goal task"):
+        TrainConfig(algo="grid", task="climb")
+    with pytest.raises(ConfigError, match="has no goal"):
+        task_reference("soaring/ThermalClimbContinuous-v0", XC_TINY)
+
+
+def test_cross_country_dagger_plans_from_the_visited_state_with_its_battery(tmp_path: Path) -> None:
+    """A DAgger start of a task is the policy's actions up to a visited state: the task's search
+    flies them, plans from the state it reaches (time, battery, airspeed flown last), and the
+    plan's demonstrations begin there; the search's prediction and the env agree."""
+    import math
+
+    import gymnasium as gym
+
+    from baselines.imitation import visited_prefixes
+    from baselines.reference.tasks import reference_plan, task_reference
+
+    xc = "soaring/CrossCountryContinuous-v0"
+    level = np.array([0.0, 0.0, 0.2], np.float32)  # mid airspeed, straight, level: the motor runs
+    found = visited_prefixes([XC_TINY], lambda sc: gym.make(xc, scenario=sc), lambda obs: level, every=1, tag="r9")
+    assert [sc.name for sc, _ in found[:2]] == ["xc-tiny-r9s1", "xc-tiny-r9s2"]
+    assert all(len(p) == k + 1 and sc.start == XC_TINY.start for k, (sc, p) in enumerate(found))
+    sc, prefix = found[1]
+    env = gym.make(xc)
+    env.reset(seed=0, options={"scenario": sc})
+    for a in prefix:
+        obs, *_ = env.step(a)
+    base = env.unwrapped
+    assert base.battery_left < base.battery  # the prefix spent some of it
+    spent_before = base.energy_spent
+    suffix, stats = reference_plan(env, 16)
+    assert stats["found"]
+    for a in suffix:
+        *_, info = env.step(a)
+    assert info["is_success"]
+    assert math.isclose(base.energy_spent - spent_before, -stats["predicted_energy"], rel_tol=1e-9, abs_tol=1e-6)
+    ref = task_reference(xc, sc, beam_width=16, prefix=prefix)
+    plan = ref.samplers["continuous"]
+    assert plan.demo_from == len(prefix) and math.isfinite(plan.best_cost)
+    assert np.array_equal(np.asarray(plan.actions[: len(prefix)], np.float32), np.asarray(prefix))
+    save_reference(ref, tmp_path / f"{sc.name}.json")
+    demos = demonstrations(tmp_path, lambda s: gym.make(xc, scenario=s), sampler="continuous", gamma=0.99)
+    assert len(demos) == len(plan.actions) - len(prefix)
+    assert np.array_equal(demos.observations[0], obs)  # the first imitated row: the visited state
+    with pytest.raises(ConfigError, match="prefix: the episode ends"):
+        task_reference(xc, sc, beam_width=16, prefix=[level] * 400)

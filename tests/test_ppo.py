@@ -31,6 +31,7 @@ from baselines.ppo import (
     turn_curve,
     validation_scenarios,
 )
+from soaring_env._validation import ConfigError
 
 TIMING = {"compute_total_s", "compute_plan_s", "compute_per_decision_s"}
 
@@ -155,20 +156,26 @@ def test_turn_curve_keeps_the_envelope_and_refines_small_turns() -> None:
     assert turn_curve(np.array([0.0, -1.0, 1.0]), 3.0)[1] == -1.0
 
 
-@pytest.mark.parametrize("task", ["climb", "xc"])
-def test_tiny_task_run_trains_saves_loads_and_evaluates(task: str, tmp_path: Path) -> None:
+@pytest.mark.parametrize(("task", "algo"), [("climb", "continuous"), ("xc", "continuous"), ("xc", "grid")])
+def test_tiny_task_run_trains_saves_loads_and_evaluates(task: str, algo: str, tmp_path: Path) -> None:
     """PPO on a task: the task's env id and validation scenarios, the observation layout saved with
-    the run, and the trained policy scored by the task table (through env.step, deterministic)."""
-    from baselines.tasks import TaskJob, run_task_job
+    the run, and the trained policy scored by the task table (through env.step, deterministic) under
+    its algo's label; two runs of one algo on one task id are refused."""
+    from baselines.tasks import TaskJob, run_task_job, task_jobs
 
-    cfg = dataclasses.replace(_tiny("continuous"), task=task)
+    cfg = dataclasses.replace(_tiny(algo), task=task)
     assert cfg.env_id == TASKS[task][1] and cfg.family == task and cfg.body_frame is True
     run = train(cfg, tmp_path / task)
     record = json.loads((run / "config.json").read_text())
     assert record["env_id"] == cfg.env_id and "time_left" in record["observation_names"]
-    job = TaskJob(cfg.env_id, f"{task}-10000", "ppo", 0, run=str(run))
+    label = "ppo" if algo == "continuous" else f"ppo-{algo}"
+    jobs = task_jobs([cfg.env_id], 1, ["random"], ppo_runs=[str(run)])
+    assert [j.agent for j in jobs] == ["random", label]
+    with pytest.raises(ConfigError, match=f"two {label} runs"):
+        task_jobs([cfg.env_id], 1, ["random"], ppo_runs=[str(run), str(run)])
+    job = TaskJob(cfg.env_id, f"{task}-10000", label, 0, run=str(run))
     a, b = run_task_job(job), run_task_job(job)
-    assert a["agent"] == "ppo" and a["energy_spent"] == b["energy_spent"] and a["decisions"] >= 1
+    assert a["agent"] == label and a["energy_spent"] == b["energy_spent"] and a["decisions"] >= 1
     assert validation_scenarios(2, None, task)[0].name == f"{task}-5000"
 
 

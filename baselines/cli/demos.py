@@ -6,13 +6,17 @@ the states a trained policy visits.
     # a DAgger round: fly a run's policy on the same scenarios, plan again from every 4th state it visits
     python scripts/demos.py --scenarios 200 --dagger results/ppo-bc/grid --every 4 --tag r1 \\
         --out results/reference-train
+    # cross-country: the task's own reference (battery, its control set) on xc-20000 ...
+    python scripts/demos.py --task xc --scenarios 200 --out results/reference-train-xc
 
 Then ``python scripts/train_ppo.py --algo grid --set 'demos="results/reference-train"'`` clones the
 plans into a policy before PPO (:mod:`baselines.imitation`). One JSON per plan, written atomically
 as soon as it is done (the reference search's own files: ``scripts/reference.py``); a rerun resumes
 and skips finished files with the same settings. A DAgger start ``<scenario>-<tag>s<k>`` is the
 state after the policy's k-th step, taken as the start of a copy of the scenario (the thermals as
-at time 0).
+at time 0). With ``--task xc`` the copy keeps its start, and the policy's first k actions become
+the plan's prefix: the search plans from where they lead, with the battery, time and airspeed the
+policy had there (``demo_from`` marks where the imitated part begins).
 """
 
 from __future__ import annotations
@@ -25,15 +29,24 @@ from pathlib import Path
 from baselines._runs import add_backend_args, check_cli_args, cli_workers
 from baselines.evaluation import PPO_MODELS
 from baselines.imitation import DEMO_SEED0, demo_reference_config, visited_starts
+from baselines.reference import ReferenceConfig
 from baselines.reference.runner import reference_table, run_references
+from baselines.reference.tasks import reference_config
 from soaring_env._validation import ConfigError
 from soaring_env.scenario import atomic_write_text, get_scenario
+
+#: ``--task``: (the env id of the task's own reference search, None: the yardstick's; scenario family).
+DEMO_TASKS: dict[str, tuple[str | None, str]] = {
+    "goal": (None, "random"),
+    "xc": ("soaring/CrossCountryContinuous-v0", "xc"),
+}
 
 
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point; returns the exit status."""
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--scenarios", type=int, default=200, help=f"training scenarios random-{DEMO_SEED0} ... (200)")
+    p.add_argument("--task", choices=DEMO_TASKS, default="goal", help="goal reaching (default) or cross-country")
+    p.add_argument("--scenarios", type=int, default=200, help=f"training scenarios <family>-{DEMO_SEED0} ... (200)")
     p.add_argument("--first", type=int, default=0, help="skip this many training scenarios (default 0)")
     p.add_argument("--sampler", choices=["continuous", "primitive"], default="continuous", help="action set")
     p.add_argument("--beam-width", type=int, default=125, help="the reference search's accuracy knob (125)")
@@ -51,11 +64,24 @@ def main(argv: list[str] | None = None) -> int:
     if not args.tag.isalnum() and args.tag != "":
         p.error(f"--tag={args.tag!r}: letters and digits only")
     try:
-        cfg = demo_reference_config(args.beam_width)
-        scenarios = [get_scenario(f"random-{DEMO_SEED0 + args.first + k}") for k in range(args.scenarios)]
+        env_id, family = DEMO_TASKS[args.task]
+        if env_id is None:
+            cfg = demo_reference_config(args.beam_width)
+        else:
+            import gymnasium as gym
+
+            ids = {"continuous": env_id, "primitive": env_id.replace("Continuous", "")}
+            env_id = ids[args.sampler]
+            probe = gym.make(env_id)
+            task_cfg = reference_config(probe, args.beam_width)
+            probe.close()
+            assert isinstance(task_cfg, ReferenceConfig)
+            cfg = task_cfg
+        scenarios = [get_scenario(f"{family}-{DEMO_SEED0 + args.first + k}") for k in range(args.scenarios)]
+        prefixes: dict[str, list] = {}
         if args.dagger is not None:
             try:
-                scenarios = _dagger_starts(args, scenarios)
+                scenarios, prefixes = _dagger_starts(args, scenarios, task=env_id is not None)
             except (FileNotFoundError, ValueError) as exc:  # no such run, or a run of another env
                 p.error(f"--dagger={args.dagger!r}: {exc}")
         t0 = time.perf_counter()
@@ -71,6 +97,8 @@ def main(argv: list[str] | None = None) -> int:
             progress=not args.no_progress,
             backend=args.backend,
             address=args.address,
+            env_id=env_id,
+            prefixes=prefixes,
         )
     except ConfigError as exc:
         p.error(str(exc))
@@ -82,12 +110,18 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _dagger_starts(args: argparse.Namespace, scenarios: list) -> list:
-    """The DAgger starts of ``args.dagger``'s policy on ``scenarios``."""
+def _dagger_starts(args: argparse.Namespace, scenarios: list, task: bool) -> tuple[list, dict[str, list]]:
+    """The DAgger starts of ``args.dagger``'s policy on ``scenarios``: (scenarios, prefixes by name).
+    Goal reaching: copies of the scenarios starting at the visited states (no prefixes); a task
+    (``task``: cross-country, whose battery and time carry over): copies with the policy's actions
+    up to each visited state as prefixes (:func:`baselines.imitation.visited_prefixes`)."""
     from baselines.agents import PPOAgent
     from baselines.evaluation import make_env, ppo_env_kwargs, ppo_model_path
+    from baselines.imitation import visited_prefixes
 
     agent = PPOAgent(ppo_model_path(args.dagger, args.ppo_model))
+    if task and agent.env_id != DEMO_TASKS[args.task][0]:
+        raise ValueError(f"a run of {agent.env_id}, not of the --task {args.task} env")
     kwargs = ppo_env_kwargs(agent.config)
 
     def make(sc):  # type: ignore[no-untyped-def]
@@ -95,9 +129,16 @@ def _dagger_starts(args: argparse.Namespace, scenarios: list) -> list:
         agent.reset(env)
         return env
 
-    starts = visited_starts(scenarios, make, lambda obs: agent.predict(obs)[0], every=args.every, tag=args.tag)
+    def act(obs):  # type: ignore[no-untyped-def]
+        return agent.predict(obs)[0]
+
+    if task:
+        found = visited_prefixes(scenarios, make, act, every=args.every, tag=args.tag)
+        starts, prefixes = [sc for sc, _ in found], {sc.name: prefix for sc, prefix in found}
+    else:
+        starts, prefixes = visited_starts(scenarios, make, act, every=args.every, tag=args.tag), {}
     print(f"dagger: {len(starts)} states visited by {agent.model_path} on {len(scenarios)} scenarios", flush=True)
-    return starts
+    return starts, prefixes
 
 
 if __name__ == "__main__":

@@ -155,6 +155,7 @@ def _figure(episodes: list[dict[str, Any]], path: Path) -> None:
         "direct": "#d35400",
         "random": "0.5",
         "ppo": "#8e44ad",
+        "ppo-grid": "#e6007e",
     }
     for ax, env_id in zip(axes.ravel(), ids, strict=False):
         first = FIGURE_SCENARIO[TASK_FAMILIES[env_id]]

@@ -278,6 +278,8 @@ def search(
     seed_controls: Sequence[np.ndarray] = (),
     progress: Callable[[int, int], None] | None = None,
     battery: float = math.inf,
+    t0: float = 0.0,
+    airspeed_prev: float | None = None,
 ) -> SearchResult:
     """Run the reference search from the scenario's start (see the module docstring).
 
@@ -296,6 +298,9 @@ def search(
         fuel + kinetic charge C' reaches it before the goal ends there (as ``"battery_empty"`` in the
         env), so only children with C' below it are kept; the goal edge itself may cross it, as in
         the env.
+    :param t0: time at the start [s] (a search from a state mid-episode).
+    :param airspeed_prev: airspeed of the edge flown before the start [m/s] (None: the first edge
+        pays no speed change, as after ``env.reset``).
     :returns: the best plan found (unsolved if none).
     """
     if not isinstance(model, SoaringModel):
@@ -305,7 +310,7 @@ def search(
         raise ConfigError(f"config={cfg!r} must be a ReferenceConfig")
     check_choice("sampler", sampler, SAMPLERS)
     t_start = time.perf_counter()
-    problem = SoaringProblem(model, sampler)
+    problem = SoaringProblem(model, sampler, t0=t0, airspeed_prev=airspeed_prev)
     ctrls = control_set(model, sampler, cfg)
     seeds = [np.asarray(sq, dtype=np.float64).reshape(-1, ctrls.shape[1]) for sq in seed_controls]
     widths = []

@@ -11,9 +11,12 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from baselines._runs import DirLock, progress_bar
 from baselines.backends import check_backend, run_jobs
 from baselines.reference.beam import ReferenceConfig
+from baselines.reference.tasks import task_reference
 from baselines.reference.yardstick import (
     ScenarioReference,
     compute_reference,
@@ -27,8 +30,10 @@ from soaring_env._validation import ConfigError
 from soaring_env.scenario import Scenario
 
 
-def _job(args: tuple[dict[str, Any], tuple[str, ...], dict[str, Any]]) -> ScenarioReference:
-    sc_dict, samplers, cfg_dict = args
+def _job(args: tuple[dict[str, Any], tuple[str, ...], dict[str, Any], str | None, list[Any]]) -> ScenarioReference:
+    sc_dict, samplers, cfg_dict, env_id, prefix = args
+    if env_id is not None:  # a task's own search (its control set, battery and time limit)
+        return task_reference(env_id, Scenario.from_dict(sc_dict), int(cfg_dict["beam_width"]), prefix)
     return compute_reference(Scenario.from_dict(sc_dict), samplers, ReferenceConfig(**cfg_dict))
 
 
@@ -64,6 +69,8 @@ def run_references(
     progress: bool = True,
     backend: str = "local",
     address: str | None = None,
+    env_id: str | None = None,
+    prefixes: Mapping[str, Sequence[Any]] | None = None,
 ) -> dict[str, ScenarioReference]:
     """Compute (or load, if already done with the same settings) the reference of every scenario.
 
@@ -76,6 +83,11 @@ def run_references(
     :param progress: show a progress bar (tqdm, if installed).
     :param backend: ``"local"`` (worker processes) or ``"ray"`` (see :mod:`baselines.backends`).
     :param address: with ``backend="ray"``: a running cluster's address (None: a local Ray instance).
+    :param env_id: a goal task's env id (cross-country): its own reference search
+        (:func:`~baselines.reference.tasks.task_reference`; ``config`` must then be that task's,
+        :func:`~baselines.reference.tasks.reference_config`) instead of the yardstick's.
+    :param prefixes: with ``env_id``: by scenario name, env actions flown before the search plans
+        (DAgger starts, :func:`baselines.imitation.visited_prefixes`).
     :returns: the references by scenario name, in the order given.
     """
     cfg = config if config is not None else ReferenceConfig()
@@ -95,7 +107,19 @@ def run_references(
             print(f"resuming: {done} of {len(scenarios)} scenarios already done in {out}", flush=True)
         if todo:
             bar = progress_bar(len(scenarios), done, progress, "reference (the first compiles the kernels)", "scenario")
-            jobs = [(s.to_dict(), tuple(samplers), cfg.to_dict()) for s in todo]
+            pre = dict(prefixes or {})
+            if pre and env_id is None:
+                raise ConfigError("prefixes need env_id (a task's own reference search)")
+            jobs = [
+                (
+                    s.to_dict(),
+                    tuple(samplers),
+                    cfg.to_dict(),
+                    env_id,
+                    [np.asarray(a).tolist() for a in pre.get(s.name, ())],
+                )
+                for s in todo
+            ]
             for i, ref in run_jobs(_job, jobs, workers=workers, backend=backend, address=address):
                 _save(ref, reference_path(out, todo[i].name))
                 if bar is not None:

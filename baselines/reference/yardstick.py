@@ -48,6 +48,8 @@ class SamplerReference:
     :param settings: the search settings (:meth:`ReferenceConfig.to_dict`).
     :param rollouts: edges flown by both searches.
     :param seconds: wall-clock time of both searches [s].
+    :param demo_from: the first step of ``actions`` that is the search's: a plan from a state a
+        policy visited (DAgger) starts with the policy's own steps, flown to reach that state.
     """
 
     best_cost: float
@@ -58,6 +60,7 @@ class SamplerReference:
     settings: dict[str, Any]
     rollouts: int
     seconds: float
+    demo_from: int = 0
 
     def regret(self, cost: float) -> float:
         return regret(cost, self.best_cost, self.direct_cost)

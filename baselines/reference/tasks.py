@@ -1,0 +1,161 @@
+"""The reference searches of the soaring tasks (``soaring_env.env.tasks``): which search, with which
+settings, for a task env -- one home for the results table (:mod:`baselines.tasks`), the
+demonstrations of behaviour cloning (``scripts/demos.py --task xc``) and the ``"grid"`` PPO
+policy's control set (:func:`baselines.ppo.control_grid`).
+
+* thermal climb (no goal): :func:`~baselines.reference.horizon.energy_search`, the most energy
+  gained over the time limit;
+* cross-country (goal and battery): the goal-reaching beam search
+  (:func:`~baselines.reference.beam.search`) with the battery as a budget, a progress term in its
+  ranking and a control set of its own (:data:`XC_SPEEDS` x :data:`XC_TURNS_DEG`, level and at the
+  zero-thrust glide angle);
+* goal reaching: the yardstick's search (:class:`~baselines.reference.beam.ReferenceConfig` defaults).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from baselines.reference.beam import ReferenceConfig, search
+from baselines.reference.bounds import lower_bound
+from baselines.reference.horizon import HorizonConfig, energy_search
+from baselines.reference.yardstick import SamplerReference, ScenarioReference, sampler_config
+from soaring_env._validation import ConfigError
+from soaring_env.scenario import Scenario
+
+#: Beam width of the tasks' reference searches (the accuracy knob; ``scripts/tasks.py --beam-width``).
+DEFAULT_BEAM_WIDTH = 500
+#: The cross-country reference's continuous control set for Ts = 10 s: the beam's grid of airspeeds
+#: [m/s] x course changes per step [deg] (clipped to the bank and stall limits), level and at the
+#: zero-thrust glide angle; and the ranking's progress weight (see ReferenceConfig.progress_weight).
+XC_SPEEDS = (12.5, 15.0, 18.0, 22.0)
+XC_TURNS_DEG = (-300.0, -150.0, -60.0, 0.0, 60.0, 150.0, 300.0)
+XC_PROGRESS_WEIGHT = 0.5
+#: First beam width of the cross-country reference's iterative widening (then doubled up to the knob).
+XC_START_WIDTH = 125
+#: Bumped when the tasks' reference settings change (records of another version are redone).
+REFERENCE_VERSION = 2
+
+
+def reference_config(env: gym.Env, beam_width: int = DEFAULT_BEAM_WIDTH) -> HorizonConfig | ReferenceConfig:
+    """The reference search settings of a task env, or of the goal-reaching env (the yardstick's
+    :class:`ReferenceConfig` with ``beam_width``)."""
+    base: Any = env.unwrapped
+    if not base.has_goal:
+        return HorizonConfig(beam_width=beam_width)
+    if not getattr(base, "has_battery", False):
+        return ReferenceConfig(beam_width=beam_width, start_width=min(beam_width, ReferenceConfig.start_width))
+    steps = int(round(base.config.time_limit / base.library.duration))
+    # iterative widening from a fixed first width: the best plan can only improve as the knob doubles
+    kw: dict[str, Any] = {"beam_width": beam_width, "start_width": min(XC_START_WIDTH, beam_width), "max_edges": steps}
+    if base.continuous:
+        kw.update(speeds=XC_SPEEDS, turns_deg=XC_TURNS_DEG, gammas_deg=(0.0,))
+    return ReferenceConfig(**kw, progress_weight=XC_PROGRESS_WEIGHT)
+
+
+def reference_plan(env: gym.Env, beam_width: int = DEFAULT_BEAM_WIDTH) -> tuple[list[Any], dict[str, Any]]:
+    """The reference search's plan from the state ``env`` is in: (env actions, stats).
+
+    Goal tasks plan from any state of an episode (its time, the airspeed flown last, the battery
+    and the steps left), so a plan from a state a policy reached replays exactly from there; the
+    thermal climb plans from a fresh reset only.
+
+    ``stats["predicted_energy"]`` is the energy the plan gains from that state [J/kg]
+    (``-energy_spent`` when replayed through ``env.step`` from a reset); ``stats["found"]`` whether
+    it reaches the goal (goal tasks).
+
+    :raises ConfigError: a thermal climb that is not at its start.
+    """
+    base: Any = env.unwrapped
+    sampler = "continuous" if base.continuous else "primitive"
+    cfg = reference_config(env, beam_width)
+    t0 = time.perf_counter()
+    stats: dict[str, Any]
+    if isinstance(cfg, HorizonConfig):
+        if base.steps:
+            raise ConfigError(f"the thermal-climb reference plans from a reset; this env is at step {base.steps}")
+        r = energy_search(base.model, sampler, base.config.time_limit, cfg)
+        actions = list(r.actions)
+        predicted = r.energy
+        stats = {"rollouts": r.rollouts, "n_controls": r.n_controls, "found": math.isfinite(r.energy)}
+    else:
+        if base.steps:  # mid-episode: the state as a start, the steps and battery left
+            left = int(round(base.config.time_limit / base.library.duration)) - base.steps
+            cfg = dataclasses.replace(cfg, max_edges=max(left, 1))
+        sc = base.scenario
+        model = dataclasses.replace(base.model, scenario=sc.replace(start=tuple(float(v) for v in base.state[:4])))
+        v_prev = float(base.airspeed_prev)
+        s = search(
+            model,
+            sampler,
+            cfg,
+            battery=float(base.battery_left),
+            t0=float(base.time),
+            airspeed_prev=v_prev if math.isfinite(v_prev) else None,
+        )
+        actions = list(s.plan.actions)
+        predicted = -s.cost
+        stats = {"rollouts": s.rollouts, "n_controls": s.n_controls, "found": bool(s.plan.solved)}
+    stats.update(seconds=time.perf_counter() - t0, predicted_energy=predicted, settings=dataclasses.asdict(cfg))
+    return actions, stats
+
+
+def task_reference(
+    env_id: str, scenario: Scenario, beam_width: int = DEFAULT_BEAM_WIDTH, prefix: Sequence[Any] = ()
+) -> ScenarioReference:
+    """The reference plan of a goal task (``env_id``, e.g. the cross-country's) in ``scenario``, as
+    the content of a reference file: the env's action set only, its ``best_cost`` the energy the
+    whole plan spends when replayed through ``env.step`` [J/kg] (inf: it does not reach the goal);
+    ``direct_cost`` is NaN (not searched).
+
+    :param prefix: env actions flown first (a DAgger start: the steps a policy took to reach the
+        state the search plans from); the plan's ``actions`` begin with them, ``demo_from`` is
+        their number.
+    :raises ConfigError: a task without a goal (the thermal climb has no plan to reach anything),
+        or a prefix that ends the episode.
+    """
+    env = gym.make(env_id)
+    try:
+        base: Any = env.unwrapped
+        if not base.has_goal:
+            raise ConfigError(f"env_id={env_id!r} has no goal; task references need a goal task (cross-country)")
+        sampler = "continuous" if base.continuous else "primitive"
+        prefix = [np.asarray(a, np.float32) if sampler == "continuous" else int(a) for a in prefix]
+        env.reset(seed=0, options={"scenario": scenario})
+        for k, a in enumerate(prefix):
+            _, _, terminated, truncated, _ = env.step(a)
+            if terminated or truncated:
+                raise ConfigError(f"prefix: the episode ends at step {k + 1} of {len(prefix)}; nothing to plan")
+        settings = reference_config(env, beam_width)
+        assert isinstance(settings, ReferenceConfig)
+        suffix, stats = reference_plan(env, beam_width)
+        actions = [*prefix, *suffix]
+        cost = math.inf
+        if stats["found"]:  # the whole plan, flown from the reset: the energy it spends
+            env.reset(seed=0, options={"scenario": scenario})
+            info: dict[str, Any] = {}
+            for a in actions:
+                *_, info = env.step(a)
+            if info.get("is_success"):
+                cost = float(base.energy_spent)
+        ref = SamplerReference(
+            best_cost=cost,
+            direct_cost=math.nan,
+            actions=[np.asarray(a).tolist() if sampler == "continuous" else int(a) for a in actions],
+            direct_actions=[],
+            flight_time=len(actions) * float(base.library.duration),
+            settings=sampler_config(settings, sampler).to_dict(),
+            rollouts=int(stats["rollouts"]),
+            seconds=float(stats["seconds"]),
+            demo_from=len(prefix),
+        )
+        return ScenarioReference(scenario=scenario, lower_bound=lower_bound(base.model), samplers={sampler: ref})
+    finally:
+        env.close()
