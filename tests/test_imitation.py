@@ -392,6 +392,16 @@ def test_cross_country_plans_clone_into_the_grid_policy(tmp_path: Path) -> None:
         TrainConfig(algo="grid", task="climb")
     with pytest.raises(ConfigError, match="has no goal"):
         task_reference("soaring/ThermalClimbContinuous-v0", XC_TINY)
+    for bad, field in (
+        (("soaring/NoSuchTask-v0", XC_TINY, 16), "env_id"),
+        ((xc, "xc-tiny", 16), "scenario"),
+        ((xc, XC_TINY, 0), "beam_width"),
+        ((xc, XC_TINY, "16"), "beam_width"),
+    ):
+        with pytest.raises(ConfigError, match=field):
+            task_reference(*bad)
+    with pytest.raises(ConfigError):
+        task_reference(xc, XC_TINY, 16, prefix=[[float("nan"), 0.0, 0.0]])
 
 
 def test_cross_country_dagger_plans_from_the_visited_state_with_its_battery(tmp_path: Path) -> None:

@@ -121,7 +121,14 @@ def task_reference(
     :raises ConfigError: a task without a goal (the thermal climb has no plan to reach anything),
         or a prefix that ends the episode.
     """
-    env = gym.make(env_id)
+    if not isinstance(scenario, Scenario):
+        raise ConfigError(f"scenario={scenario!r} must be a soaring_env.scenario.Scenario")
+    if isinstance(beam_width, bool) or not isinstance(beam_width, int) or beam_width < 1:
+        raise ConfigError(f"beam_width={beam_width!r} must be an integer >= 1")
+    try:
+        env = gym.make(env_id)
+    except gym.error.Error as exc:  # not a registered id
+        raise ConfigError(f"env_id={env_id!r} is not a registered soaring env ({exc})") from None
     try:
         base: Any = env.unwrapped
         if not base.has_goal:
