@@ -34,6 +34,7 @@ import gymnasium as gym
 import numpy as np
 
 from baselines.reference import ReferenceConfig, load_references
+from baselines.reference.tasks import goal_config
 from soaring_env._validation import ConfigError
 from soaring_env.scenario import Scenario
 
@@ -44,7 +45,7 @@ DEMO_SEED0 = 20_000
 def demo_reference_config(beam_width: int = 125) -> ReferenceConfig:
     """The reference search of the demonstrations: the yardstick's search at a 16x narrower beam
     (about 10 s a scenario instead of 3 min, on one core), iterative widening from the same width."""
-    return ReferenceConfig(beam_width=beam_width, start_width=min(beam_width, ReferenceConfig.start_width))
+    return goal_config(beam_width)
 
 
 @dataclass(frozen=True)

@@ -44,6 +44,12 @@ XC_START_WIDTH = 125
 REFERENCE_VERSION = 2
 
 
+def goal_config(beam_width: int) -> ReferenceConfig:
+    """The yardstick's search at ``beam_width``, iterative widening from the same first width (or
+    from ``beam_width`` itself where that is narrower): goal reaching's demonstrations and grid."""
+    return ReferenceConfig(beam_width=beam_width, start_width=min(beam_width, ReferenceConfig.start_width))
+
+
 def reference_config(env: gym.Env, beam_width: int = DEFAULT_BEAM_WIDTH) -> HorizonConfig | ReferenceConfig:
     """The reference search settings of a task env, or of the goal-reaching env (the yardstick's
     :class:`ReferenceConfig` with ``beam_width``)."""
@@ -51,7 +57,7 @@ def reference_config(env: gym.Env, beam_width: int = DEFAULT_BEAM_WIDTH) -> Hori
     if not base.has_goal:
         return HorizonConfig(beam_width=beam_width)
     if not getattr(base, "has_battery", False):
-        return ReferenceConfig(beam_width=beam_width, start_width=min(beam_width, ReferenceConfig.start_width))
+        return goal_config(beam_width)
     steps = int(round(base.config.time_limit / base.library.duration))
     # iterative widening from a fixed first width: the best plan can only improve as the knob doubles
     kw: dict[str, Any] = {"beam_width": beam_width, "start_width": min(XC_START_WIDTH, beam_width), "max_edges": steps}
