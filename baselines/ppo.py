@@ -51,7 +51,7 @@ import gymnasium as gym
 import numpy as np
 
 from soaring_env._validation import ConfigError
-from soaring_env.scenario import HELDOUT_SEED0, Scenario, atomic_write_text, get_scenario
+from soaring_env.scenario import HELDOUT_SEED0, VALIDATION_SEED0, Scenario, atomic_write_text, get_scenario
 
 DISCRETE_ID = "soaring/Soaring-v0"
 CONTINUOUS_ID = "soaring/SoaringContinuous-v0"
@@ -74,7 +74,6 @@ TASKS: dict[str, tuple[str, str, str]] = {
 #: ``"dummy"`` / ``"subproc"``: SB3's vector envs over single ``gym.make`` envs.
 VEC_ENVS = ("native", "dummy", "subproc")
 #: Seeds of the validation scenarios watched during training (test seeds start at 10 000).
-VALIDATION_SEED0 = 5_000
 
 
 def _module_qualified(env_id: str) -> str:

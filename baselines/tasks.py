@@ -28,7 +28,7 @@ from baselines.agents import HeuristicAgent, PPOAgent, RandomAgent, ReplayAgent,
 from baselines.evaluation import bootstrap_ci, median_circling, ppo_env_kwargs, run_episode
 from baselines.reference.tasks import DEFAULT_BEAM_WIDTH, REFERENCE_VERSION, reference_plan
 from soaring_env._validation import ConfigError, check_choice
-from soaring_env.scenario import get_scenario, heldout_names
+from soaring_env.scenario import HELDOUT_SEED0, get_scenario, heldout_names
 
 #: The task ids and their scenario families.
 TASK_FAMILIES = {
@@ -82,9 +82,12 @@ def task_jobs(
     agents: Sequence[str],
     beam_width: int = DEFAULT_BEAM_WIDTH,
     ppo_runs: Sequence[str] = (),
+    first_seed: int = HELDOUT_SEED0,
 ) -> list[TaskJob]:
     """Every (task id, held-out scenario, agent) job, seed 0; each PPO run directory adds an agent
-    (:func:`ppo_label`) on the task id it was trained on (its ``config.json``)."""
+    (:func:`ppo_label`) on the task id it was trained on (its ``config.json``). ``first_seed``:
+    the scenarios' first seed (:data:`~soaring_env.scenario.VALIDATION_SEED0`: the validation
+    scenarios, to choose a policy without looking at the test set)."""
     for e in env_ids:
         check_choice("env_id", e, tuple(TASK_FAMILIES))
     for a in agents:
@@ -106,7 +109,7 @@ def task_jobs(
     jobs = []
     for env_id in env_ids:
         fam = TASK_FAMILIES[env_id]
-        for sc in heldout_names(n_scenarios, family=fam):
+        for sc in heldout_names(n_scenarios, start=first_seed, family=fam):
             for agent in agents:
                 if agent == "direct" and fam != "xc":
                     continue  # no goal to fly to

@@ -339,6 +339,9 @@ RANDOM = "random"
 #: First seed of the held-out test scenarios ``random-10000``, ``random-10001``, ... (training draws
 #: from each env's own stream; PPO's validation scenarios use seeds 5000+).
 HELDOUT_SEED0 = 10_000
+#: First seed of the validation scenarios (``random-5000``, ``xc-5000``, ...): what a policy is
+#: chosen on, disjoint from the held-out test seeds and the demonstrations' 20000+.
+VALIDATION_SEED0 = 5_000
 _RANDOM_SEED = re.compile(r"^(random|climb|xc)-([0-9]+)$")
 _FORMS = (
     "random-<seed> (a random scenario drawn with that seed; held-out: random-10000, random-10001, ...), "

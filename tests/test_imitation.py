@@ -24,6 +24,7 @@ from baselines.ppo import (
     turn_curve,
 )
 from baselines.reference import ReferenceConfig, compute_reference, load_reference, save_reference
+from baselines.reference.tasks import XC_DEMO_TIME_WEIGHT
 from soaring_env._validation import ConfigError
 from soaring_env.physics.thermals import Thermal, WindField
 from soaring_env.scenario import Bounds, GoalRegion, Scenario
@@ -324,12 +325,16 @@ def test_demos_cli_plans_resumes_and_runs_a_dagger_round(
     assert main(["--task", "xc", "--scenarios", "1", *common[:-1], str(xc_out)]) == 0  # the task's own search
     xc_ref = load_reference(xc_out / "xc-20000.json")
     assert set(xc_ref.samplers) == {"continuous"} and xc_ref.samplers["continuous"].settings["progress_weight"] > 0
+    assert xc_ref.samplers["continuous"].settings["time_weight"] == XC_DEMO_TIME_WEIGHT  # the demonstrator's
     for bad, field in (
         (["--scenarios", "0"], "--scenarios"),
         (["--every", "0"], "--every"),
         (["--tag", "a-b"], "--tag"),
         (["--dagger", str(tmp_path / "nowhere")], "--dagger"),
         (["--task", "xc", "--dagger", str(run)], "--dagger"),  # a mid-flight start would get a fresh battery
+        (["--time-weight", "1"], "--time-weight"),  # goal reaching: none
+        (["--task", "xc", "--time-weight", "-1"], "time_weight"),
+        (["--task", "xc", "--time-weight", "nan"], "time_weight"),
     ):
         with pytest.raises(SystemExit) as exc:
             main([*bad, *common])
@@ -402,6 +407,11 @@ def test_cross_country_plans_clone_into_the_grid_policy(tmp_path: Path) -> None:
             task_reference(*bad)
     with pytest.raises(ConfigError):
         task_reference(xc, XC_TINY, 16, prefix=[[float("nan"), 0.0, 0.0]])
+    with pytest.raises(ConfigError, match="time_weight"):  # the goal-reaching search takes no time weight
+        reference_config(gym.make(CONTINUOUS_ID), 16, time_weight=1.0)
+    prompt = task_reference(xc, XC_TINY, beam_width=16, time_weight=XC_DEMO_TIME_WEIGHT).samplers["continuous"]
+    assert prompt.settings["time_weight"] == XC_DEMO_TIME_WEIGHT
+    assert math.isfinite(prompt.best_cost) and prompt.flight_time <= plan.flight_time
 
 
 def test_cross_country_dagger_plans_from_the_visited_state_with_its_battery(tmp_path: Path) -> None:

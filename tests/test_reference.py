@@ -44,22 +44,25 @@ TINY = Scenario(
 SUBSET = (0, 1, 2, 5, 6, 7, 12, 22, 37, 47, 57, 67)
 
 
-def _enumerate(model: SoaringModel, prims: tuple[int, ...], depth: int) -> float:
-    """Brute force: the cheapest primitive sequence of at most ``depth`` edges that reaches the goal."""
+def _enumerate(model: SoaringModel, prims: tuple[int, ...], depth: int, time_weight: float = 0.0) -> float:
+    """Brute force: the cheapest primitive sequence of at most ``depth`` edges that reaches the goal
+    (its cost; with ``time_weight``: the least cost + time_weight x flight time)."""
     problem = SoaringProblem(model, "primitive")
     ctrls = np.array(prims, dtype=np.float64)[:, None]
     x = problem.root_state()[None, :]
     j = np.zeros(1)
+    t = np.zeros(1)
     best = math.inf
     for _ in range(depth):
         n, m = len(x), len(ctrls)
         e = problem.propagate(np.repeat(x, m, axis=0), np.tile(ctrls, (n, 1)))
         jj = np.repeat(j, m) + e.cost
+        tt = np.repeat(t, m) + e.duration
         goal = e.outcome == EDGE_GOAL
         if goal.any():
-            best = min(best, float(jj[goal].min()))
+            best = min(best, float((jj + time_weight * tt)[goal].min()))
         ok = e.outcome == EDGE_VALID
-        x, j = e.states[ok], jj[ok]
+        x, j, t = e.states[ok], jj[ok], tt[ok]
     return best
 
 
@@ -85,6 +88,28 @@ def test_search_finds_the_enumerated_optimum(tiny: SoaringModel, depth: int) -> 
     res = search(tiny, "primitive", cfg)
     assert res.cost == pytest.approx(exact, abs=1e-9)
     assert res.plan.solved and len(res.plan) <= depth
+
+
+@pytest.mark.parametrize("time_weight", [2.0, 40.0])
+def test_time_weight_finds_the_enumerated_optimum(tiny: SoaringModel, time_weight: float) -> None:
+    """With a time weight the exhaustive search minimizes cost + weight x flight time (brute force),
+    reports the plan's energy cost, and at a large weight takes a plan no longer than the cheapest."""
+    exact = _enumerate(tiny, SUBSET, 3, time_weight)
+    cfg = ReferenceConfig(
+        beam_width=len(SUBSET) ** 3,
+        start_width=len(SUBSET) ** 3,
+        max_edges=3,
+        cell_size=1.0,
+        height_cell=0.2,
+        course_cells=720,
+        primitives=SUBSET,
+    )
+    res = search(tiny, "primitive", dataclasses.replace(cfg, time_weight=time_weight))
+    assert res.cost == pytest.approx(float(np.sum(res.plan.edge_costs)), abs=1e-9)  # energy, not objective
+    flight_time = float(res.plan.times[-1] - res.plan.times[0])
+    assert res.cost + time_weight * flight_time == pytest.approx(exact, abs=1e-9)
+    cheapest = search(tiny, "primitive", cfg)
+    assert res.cost >= cheapest.cost - 1e-9 and len(res.plan) <= len(cheapest.plan)
 
 
 def test_default_cells_never_beat_the_optimum(tiny: SoaringModel) -> None:
@@ -307,6 +332,9 @@ def test_planner_seed_makes_the_primitive_reference_no_worse_than_the_planner(ti
         ({"start_width": 0}, "start_width"),
         ({"planner_iterations": -1}, "planner_iterations"),
         ({"planner_iterations": 2.5}, "planner_iterations"),
+        ({"time_weight": -1.0}, "time_weight"),
+        ({"time_weight": float("nan")}, "time_weight"),
+        ({"time_weight": "1"}, "time_weight"),
     ],
 )
 def test_bad_settings_name_the_field(kwargs: dict, field: str) -> None:

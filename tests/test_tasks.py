@@ -329,7 +329,10 @@ def test_tasks_script_writes_replays_and_resumes(tmp_path, capsys) -> None:
     capsys.readouterr()
     assert main(args) == 0
     assert "(4 done)" in capsys.readouterr().out
-    with pytest.raises(SystemExit):
-        main(["--scenarios", "0", "--out", str(tmp_path)])
-    with pytest.raises(SystemExit):
-        main(["--envs", "soaring/Nope-v0", "--out", str(tmp_path)])
+    val = tmp_path / "validation"
+    assert main([*args[:-3], "--out", str(val), "--no-progress", "--split", "validation", "--envs", args[2]]) == 0
+    names = {e["scenario"] for e in json.loads((val / "results.json").read_text())["episodes"]}
+    assert names == {"xc-5000"} and not (val / "trajectories.png").exists()  # validation: no test scenario
+    for bad in (["--scenarios", "0"], ["--envs", "soaring/Nope-v0"], ["--split", "test"]):
+        with pytest.raises(SystemExit):
+            main([*bad, "--out", str(tmp_path)])

@@ -31,7 +31,7 @@ from baselines.evaluation import PPO_MODELS
 from baselines.imitation import DEMO_SEED0, demo_reference_config, visited_starts
 from baselines.reference import ReferenceConfig
 from baselines.reference.runner import reference_table, run_references
-from baselines.reference.tasks import reference_config
+from baselines.reference.tasks import XC_DEMO_TIME_WEIGHT, reference_config
 from soaring_env._validation import ConfigError
 from soaring_env.scenario import atomic_write_text, get_scenario
 
@@ -50,6 +50,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--first", type=int, default=0, help="skip this many training scenarios (default 0)")
     p.add_argument("--sampler", choices=["continuous", "primitive"], default="continuous", help="action set")
     p.add_argument("--beam-width", type=int, default=125, help="the reference search's accuracy knob (125)")
+    p.add_argument(
+        "--time-weight",
+        type=float,
+        default=None,
+        help=f"--task xc: the search's time weight [J/kg per s] (default {XC_DEMO_TIME_WEIGHT:g}; 0: least energy)",
+    )
     p.add_argument("--dagger", default=None, metavar="RUN", help="plan from the states this PPO run visits")
     p.add_argument("--ppo-model", choices=PPO_MODELS, default="final", help="which model of RUN")
     p.add_argument("--every", type=int, default=4, help="with --dagger: every this many steps (default 4)")
@@ -66,6 +72,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         env_id, family = DEMO_TASKS[args.task]
         if env_id is None:
+            if args.time_weight:
+                p.error(f"--time-weight={args.time_weight!r}: goal-reaching demonstrations take none (--task xc only)")
             cfg = demo_reference_config(args.beam_width)
         else:
             import gymnasium as gym
@@ -73,7 +81,8 @@ def main(argv: list[str] | None = None) -> int:
             ids = {"continuous": env_id, "primitive": env_id.replace("Continuous", "")}
             env_id = ids[args.sampler]
             probe = gym.make(env_id)
-            task_cfg = reference_config(probe, args.beam_width)
+            tw = XC_DEMO_TIME_WEIGHT if args.time_weight is None else args.time_weight
+            task_cfg = reference_config(probe, args.beam_width, tw)
             probe.close()
             assert isinstance(task_cfg, ReferenceConfig)
             cfg = task_cfg

@@ -6,10 +6,12 @@ scenarios of every task id (thermal climb, cross-country; primitives and continu
     python scripts/tasks.py --beam-width 1000     # the reference's accuracy knob
     python scripts/tasks.py --convergence         # climb-10000, xc-10000: reference at 1/2, 1, 2 x the width
     python scripts/tasks.py --ppo results/ppo-climb/continuous   # adds a trained PPO run's rows
+    python scripts/tasks.py --split validation --ppo RUN --out DIR   # validation scenarios (xc-5000, ...)
 
 Writes ``results/tasks/results.json`` (every episode, atomically after each; a rerun resumes and
 redoes only missing or changed jobs; one run per folder at a time), ``table.md`` and
-``trajectories.png`` (each task id's first held-out scenario: the agents' paths over the thermals).
+``trajectories.png`` (each task id's first held-out scenario: the agents' paths over the thermals;
+not for ``--split validation``, whose scenarios choose a policy without looking at the test set).
 """
 
 from __future__ import annotations
@@ -37,9 +39,11 @@ from baselines.tasks import (
     task_jobs,
 )
 from soaring_env._validation import ConfigError
-from soaring_env.scenario import atomic_write_text, get_scenario
+from soaring_env.scenario import HELDOUT_SEED0, VALIDATION_SEED0, atomic_write_text, get_scenario
 
 SCHEMA = 1
+#: ``--split``: the first seed of its scenarios.
+SPLITS = {"heldout": HELDOUT_SEED0, "validation": VALIDATION_SEED0}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -47,6 +51,12 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--envs", nargs="+", choices=tuple(TASK_FAMILIES), default=list(TASK_FAMILIES), help="task ids")
     p.add_argument("--scenarios", type=int, default=10, help="held-out scenarios per task id (default 10)")
+    p.add_argument(
+        "--split",
+        choices=SPLITS,
+        default="heldout",
+        help="held-out test scenarios <family>-10000 ... (default) or validation ones <family>-5000 ...",
+    )
     p.add_argument("--agents", nargs="+", choices=AGENTS, default=list(AGENTS), help="agents")
     p.add_argument("--beam-width", type=int, default=DEFAULT_BEAM_WIDTH, help="the reference search's accuracy knob")
     p.add_argument(
@@ -62,7 +72,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.convergence:
             return _convergence(args)
-        jobs = task_jobs(args.envs, args.scenarios, args.agents, args.beam_width, args.ppo)
+        jobs = task_jobs(args.envs, args.scenarios, args.agents, args.beam_width, args.ppo, SPLITS[args.split])
         return _run(jobs, args)
     except ConfigError as exc:
         p.error(str(exc))
@@ -93,7 +103,7 @@ def _run(jobs: list[TaskJob], args: Any) -> int:
         table = markdown_table(summarize(episodes))
         atomic_write_text(out / "table.md", table)
         print(table)
-        if not args.no_figures:
+        if not args.no_figures and args.split == "heldout":  # the figure's scenarios are held-out ones
             _figure(episodes, out / "trajectories.png")
     print(f"done in {time.perf_counter() - t0:.0f} s", flush=True)
     return 0

@@ -117,6 +117,12 @@ class ReferenceConfig:
         rates alike (circling high in lift vs gliding on: both keep J + H) the nearer goes first --
         needed over long distances (the cross-country task); 0 (default): the goal-reaching
         references as published. Ranking only, never pruning: the search stays admissible.
+    :param time_weight: adds ``time_weight x t`` (t: flight time [s]) to the objective the search
+        minimizes [J/kg per s]: among plans that reach the goal it keeps the one with the least
+        energy cost plus this charge, and prunes against it, so that of plans alike in energy the
+        earlier arrival wins (a plan that circles at the top of a thermal, where lift and sink cancel,
+        is then no longer as good as one that glides on at once). The reported cost stays the plan's
+        energy cost. 0 (default): least energy, as the yardstick's references are published.
     :param planner_iterations: for the primitives (:func:`~baselines.reference.compute_reference`;
         :func:`search` takes its seeds as arguments): random expansions of a deterministic run of
         the soaring SST (seed 0, :func:`baselines.sst.plan_soaring`) whose plan seeds the search
@@ -139,9 +145,11 @@ class ReferenceConfig:
     region_quota: int = 8
     planner_iterations: int = 0
     progress_weight: float = 0.0
+    time_weight: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "progress_weight", check_range("progress_weight", self.progress_weight, 0.0, 100.0))
+        object.__setattr__(self, "time_weight", check_range("time_weight", self.time_weight, 0.0, 1000.0))
         check_positive("region_size", self.region_size)
         check_int("region_quota", self.region_quota, 0)
         check_int("planner_iterations", self.planner_iterations, 0)
@@ -322,7 +330,7 @@ def search(
     if not (isinstance(battery, (int, float)) and battery > 0.0) or math.isnan(battery):
         raise ConfigError(f"battery={battery!r} must be a number > 0 J/kg (math.inf: no battery)")
     ctx = _Context.make(model, problem, sampler, ctrls, cfg, float(battery))
-    best: tuple[float, np.ndarray, np.ndarray] | None = None
+    best: tuple[float, float, np.ndarray, np.ndarray] | None = None
     rollouts = depth = 0
     for k, width in enumerate(widths):
 
@@ -330,7 +338,7 @@ def search(
             if progress is not None:
                 progress(k * n + d, n * len(widths))
 
-        found, n_roll, depth = _beam(ctx, width, [*seeds, *([best[2]] if best else [])], cb)
+        found, n_roll, depth = _beam(ctx, width, [*seeds, *([best[3]] if best else [])], cb)
         rollouts += n_roll
         if found is not None and (best is None or found[0] < best[0]):
             best = found
@@ -340,7 +348,7 @@ def search(
         plan = plan_from_result(problem, res)
         cost = math.inf
     else:
-        cost, st, cu = best
+        _, cost, st, cu = best
         edge = problem.propagate(st[:-1], cu)  # the edge costs, re-flown along the path
         if not np.array_equal(edge.states, st[1:]):
             raise RuntimeError("internal error: the reference plan does not re-fly to its nodes")
@@ -405,9 +413,10 @@ class _Context:
 
 def _beam(
     ctx: _Context, width: int, seeds: list[np.ndarray], progress: Callable[[int, int], None]
-) -> tuple[tuple[float, np.ndarray, np.ndarray] | None, int, int]:
-    """One beam search of ``width``: ((cost, path states (n + 1, 6), controls (n, c)) of the best
-    plan or None, rollouts, deepest depth)."""
+) -> tuple[tuple[float, float, np.ndarray, np.ndarray] | None, int, int]:
+    """One beam search of ``width``: ((objective, cost, path states (n + 1, 6), controls (n, c)) of
+    the best plan or None, rollouts, deepest depth); the objective is the cost plus
+    ``time_weight`` x its flight time."""
     problem, ctrls, cfg = ctx.problem, ctx.ctrls, ctx.cfg
     m = len(ctrls)
     gn, ge, gr = ctx.goal
@@ -416,11 +425,13 @@ def _beam(
     # per-depth node arrays; node i of depth d has parent parents[d][i] in depth d - 1
     states = [root[None, :]]
     costs = [np.zeros(1)]
+    times = [np.zeros(1)]  # flight time since the root [s] (used with a time weight only)
+    tw = cfg.time_weight
     parents: list[np.ndarray] = [np.full(1, -1, dtype=np.int64)]
     controls_of: list[np.ndarray] = [np.full(1, -1, dtype=np.int64)]
     cell_keys = np.zeros(0, dtype=np.int64)  # sorted keys of every kept node so far
     cell_best = np.zeros(0)
-    best_cost = math.inf
+    best_cost = best_key = math.inf
     best: tuple[int, int, int, np.ndarray] | None = None  # (depth of parent, parent index, control, end state)
     seed_idx = [0] * len(seeds)  # index of each seeded path's node in the current beam (-1: gone)
     rollouts = 0
@@ -434,19 +445,24 @@ def _beam(
         ctl = np.tile(np.arange(m, dtype=np.int64), n)
         end = np.empty((n * m, 6))
         cost = np.empty(n * m)
+        dur = np.empty(n * m)
         out = np.empty(n * m, dtype=np.int64)
         for s in range(0, n * m, _ROWS_PER_CALL):
             sl = slice(s, min(s + _ROWS_PER_CALL, n * m))
             e = problem.propagate(x[par[sl]], ctrls[ctl[sl]])
-            end[sl], cost[sl], out[sl] = e.states, e.cost, e.outcome
+            end[sl], cost[sl], dur[sl], out[sl] = e.states, e.cost, e.duration, e.outcome
         rollouts += n * m
         j = jc[par] + cost
+        tj = times[-1][par] + dur
+        # the objective: J, plus the time charge (flight time only grows, so J + tw t bounds every
+        # descendant's charge from below and the pruning below stays admissible)
+        obj = j + tw * tj if tw else j
         # 2. goal edges: the cheapest complete plan (first in node-major order on ties)
         goal = np.flatnonzero(out == EDGE_GOAL)
         if len(goal):
-            i = goal[int(np.argmin(j[goal]))]
-            if j[i] < best_cost:
-                best_cost = float(j[i])
+            i = goal[int(np.argmin(obj[goal]))]
+            if obj[i] < best_key:
+                best_key, best_cost = float(obj[i]), float(j[i])
                 best = (depth - 1, int(par[i]), int(ctl[i]), end[i].copy())
         # the seeded paths' children this depth (kept whatever their rank)
         seed_child = [-1] * len(seeds)
@@ -458,7 +474,7 @@ def _beam(
                     seed_child[q] = c if out[c] == EDGE_VALID else -1
         forced = np.array(sorted({c for c in seed_child if c >= 0}), dtype=np.int64)
         # 3. valid children; admissible pruning (module docstring)
-        valid = (out == EDGE_VALID) & (j - G * (h_cap - end[:, S_H]) < best_cost)
+        valid = (out == EDGE_VALID) & (obj - G * (h_cap - end[:, S_H]) < best_key)
         if ctx.battery != math.inf:  # C' = J + g (h - h_0): the motor energy so far
             charged = j + G * (end[:, S_H] - root[S_H]) < ctx.battery
             valid &= charged
@@ -505,6 +521,7 @@ def _beam(
         sel_children = keep[uniq]
         states.append(end[sel_children])
         costs.append(j[sel_children])
+        times.append(tj[sel_children])
         parents.append(par[sel_children])
         controls_of.append(ctl[sel_children])
         progress(depth, cfg.max_edges)
@@ -520,7 +537,7 @@ def _beam(
         i = int(parents[d][i])
         d -= 1
     path_states.append(states[0][0])
-    return (best_cost, np.array(path_states[::-1]), ctrls[np.array(path_ctrls[::-1])]), rollouts, depth
+    return (best_key, best_cost, np.array(path_states[::-1]), ctrls[np.array(path_ctrls[::-1])]), rollouts, depth
 
 
 def thermal_values(model: SoaringModel, controls: np.ndarray) -> np.ndarray:

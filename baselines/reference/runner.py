@@ -33,7 +33,8 @@ from soaring_env.scenario import Scenario
 def _job(args: tuple[dict[str, Any], tuple[str, ...], dict[str, Any], str | None, list[Any]]) -> ScenarioReference:
     sc_dict, samplers, cfg_dict, env_id, prefix = args
     if env_id is not None:  # a task's own search (its control set, battery and time limit)
-        return task_reference(env_id, Scenario.from_dict(sc_dict), int(cfg_dict["beam_width"]), prefix)
+        sc = Scenario.from_dict(sc_dict)
+        return task_reference(env_id, sc, int(cfg_dict["beam_width"]), prefix, float(cfg_dict["time_weight"]))
     return compute_reference(Scenario.from_dict(sc_dict), samplers, ReferenceConfig(**cfg_dict))
 
 

@@ -40,6 +40,12 @@ XC_TURNS_DEG = (-300.0, -150.0, -60.0, 0.0, 60.0, 150.0, 300.0)
 XC_PROGRESS_WEIGHT = 0.5
 #: First beam width of the cross-country reference's iterative widening (then doubled up to the knob).
 XC_START_WIDTH = 125
+#: Time weight [J/kg per s] of the cross-country demonstrations (``scripts/demos.py --task xc``;
+#: ReferenceConfig.time_weight): plans alike in energy that arrive sooner win, so the demonstrator
+#: leaves a thermal once it climbs slower than about 0.1 m/s instead of circling at its top until
+#: the time limit nears (a choice a policy cannot copy: it depends on the minutes left, not on
+#: what the lift does). The results table's reference keeps 0: the least energy.
+XC_DEMO_TIME_WEIGHT = 1.0
 #: Bumped when the tasks' reference settings change (records of another version are redone).
 REFERENCE_VERSION = 2
 
@@ -50,23 +56,31 @@ def goal_config(beam_width: int) -> ReferenceConfig:
     return ReferenceConfig(beam_width=beam_width, start_width=min(beam_width, ReferenceConfig.start_width))
 
 
-def reference_config(env: gym.Env, beam_width: int = DEFAULT_BEAM_WIDTH) -> HorizonConfig | ReferenceConfig:
+def reference_config(
+    env: gym.Env, beam_width: int = DEFAULT_BEAM_WIDTH, time_weight: float = 0.0
+) -> HorizonConfig | ReferenceConfig:
     """The reference search settings of a task env, or of the goal-reaching env (the yardstick's
-    :class:`ReferenceConfig` with ``beam_width``)."""
+    :class:`ReferenceConfig` with ``beam_width``); ``time_weight`` [J/kg per s]: the cross-country
+    search's (:attr:`ReferenceConfig.time_weight`; the other tasks refuse any but 0)."""
     base: Any = env.unwrapped
+    xc = base.has_goal and getattr(base, "has_battery", False)
+    if time_weight != 0.0 and not xc:
+        raise ConfigError(f"time_weight={time_weight!r}; allowed: 0 (only the cross-country search has one)")
     if not base.has_goal:
         return HorizonConfig(beam_width=beam_width)
-    if not getattr(base, "has_battery", False):
+    if not xc:
         return goal_config(beam_width)
     steps = int(round(base.config.time_limit / base.library.duration))
     # iterative widening from a fixed first width: the best plan can only improve as the knob doubles
     kw: dict[str, Any] = {"beam_width": beam_width, "start_width": min(XC_START_WIDTH, beam_width), "max_edges": steps}
     if base.continuous:
         kw.update(speeds=XC_SPEEDS, turns_deg=XC_TURNS_DEG, gammas_deg=(0.0,))
-    return ReferenceConfig(**kw, progress_weight=XC_PROGRESS_WEIGHT)
+    return ReferenceConfig(**kw, progress_weight=XC_PROGRESS_WEIGHT, time_weight=time_weight)
 
 
-def reference_plan(env: gym.Env, beam_width: int = DEFAULT_BEAM_WIDTH) -> tuple[list[Any], dict[str, Any]]:
+def reference_plan(
+    env: gym.Env, beam_width: int = DEFAULT_BEAM_WIDTH, time_weight: float = 0.0
+) -> tuple[list[Any], dict[str, Any]]:
     """The reference search's plan from the state ``env`` is in: (env actions, stats).
 
     Goal tasks plan from any state of an episode (its time, the airspeed flown last, the battery
@@ -77,11 +91,12 @@ def reference_plan(env: gym.Env, beam_width: int = DEFAULT_BEAM_WIDTH) -> tuple[
     (``-energy_spent`` when replayed through ``env.step`` from a reset); ``stats["found"]`` whether
     it reaches the goal (goal tasks).
 
+    :param time_weight: see :func:`reference_config`.
     :raises ConfigError: a thermal climb that is not at its start.
     """
     base: Any = env.unwrapped
     sampler = "continuous" if base.continuous else "primitive"
-    cfg = reference_config(env, beam_width)
+    cfg = reference_config(env, beam_width, time_weight)
     t0 = time.perf_counter()
     stats: dict[str, Any]
     if isinstance(cfg, HorizonConfig):
@@ -114,7 +129,11 @@ def reference_plan(env: gym.Env, beam_width: int = DEFAULT_BEAM_WIDTH) -> tuple[
 
 
 def task_reference(
-    env_id: str, scenario: Scenario, beam_width: int = DEFAULT_BEAM_WIDTH, prefix: Sequence[Any] = ()
+    env_id: str,
+    scenario: Scenario,
+    beam_width: int = DEFAULT_BEAM_WIDTH,
+    prefix: Sequence[Any] = (),
+    time_weight: float = 0.0,
 ) -> ScenarioReference:
     """The reference plan of a goal task (``env_id``, e.g. the cross-country's) in ``scenario``, as
     the content of a reference file: the env's action set only, its ``best_cost`` the energy the
@@ -124,6 +143,8 @@ def task_reference(
     :param prefix: env actions flown first (a DAgger start: the steps a policy took to reach the
         state the search plans from); the plan's ``actions`` begin with them, ``demo_from`` is
         their number.
+    :param time_weight: the search's time weight [J/kg per s] (:func:`reference_config`;
+        :data:`XC_DEMO_TIME_WEIGHT` for demonstrations), recorded in the file's settings.
     :raises ConfigError: a task without a goal (the thermal climb has no plan to reach anything),
         or a prefix that ends the episode.
     """
@@ -146,9 +167,9 @@ def task_reference(
             _, _, terminated, truncated, _ = env.step(a)
             if terminated or truncated:
                 raise ConfigError(f"prefix: the episode ends at step {k + 1} of {len(prefix)}; nothing to plan")
-        settings = reference_config(env, beam_width)
+        settings = reference_config(env, beam_width, time_weight)
         assert isinstance(settings, ReferenceConfig)
-        suffix, stats = reference_plan(env, beam_width)
+        suffix, stats = reference_plan(env, beam_width, time_weight)
         actions = [*prefix, *suffix]
         cost = math.inf
         if stats["found"]:  # the whole plan, flown from the reset: the energy it spends
