@@ -73,7 +73,6 @@ TASKS: dict[str, tuple[str, str, str]] = {
 #: ``"native"``: one natively batched env (:class:`~soaring_env.env.sb3.SoaringSB3VecEnv`);
 #: ``"dummy"`` / ``"subproc"``: SB3's vector envs over single ``gym.make`` envs.
 VEC_ENVS = ("native", "dummy", "subproc")
-#: Seeds of the validation scenarios watched during training (test seeds start at 10 000).
 
 
 def _module_qualified(env_id: str) -> str:

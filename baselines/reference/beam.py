@@ -431,7 +431,7 @@ def _beam(
     controls_of: list[np.ndarray] = [np.full(1, -1, dtype=np.int64)]
     cell_keys = np.zeros(0, dtype=np.int64)  # sorted keys of every kept node so far
     cell_best = np.zeros(0)
-    best_cost = best_key = math.inf
+    best_cost = best_obj = math.inf
     best: tuple[int, int, int, np.ndarray] | None = None  # (depth of parent, parent index, control, end state)
     seed_idx = [0] * len(seeds)  # index of each seeded path's node in the current beam (-1: gone)
     rollouts = 0
@@ -461,8 +461,8 @@ def _beam(
         goal = np.flatnonzero(out == EDGE_GOAL)
         if len(goal):
             i = goal[int(np.argmin(obj[goal]))]
-            if obj[i] < best_key:
-                best_key, best_cost = float(obj[i]), float(j[i])
+            if obj[i] < best_obj:
+                best_obj, best_cost = float(obj[i]), float(j[i])
                 best = (depth - 1, int(par[i]), int(ctl[i]), end[i].copy())
         # the seeded paths' children this depth (kept whatever their rank)
         seed_child = [-1] * len(seeds)
@@ -474,7 +474,7 @@ def _beam(
                     seed_child[q] = c if out[c] == EDGE_VALID else -1
         forced = np.array(sorted({c for c in seed_child if c >= 0}), dtype=np.int64)
         # 3. valid children; admissible pruning (module docstring)
-        valid = (out == EDGE_VALID) & (obj - G * (h_cap - end[:, S_H]) < best_key)
+        valid = (out == EDGE_VALID) & (obj - G * (h_cap - end[:, S_H]) < best_obj)
         if ctx.battery != math.inf:  # C' = J + g (h - h_0): the motor energy so far
             charged = j + G * (end[:, S_H] - root[S_H]) < ctx.battery
             valid &= charged
@@ -537,7 +537,7 @@ def _beam(
         i = int(parents[d][i])
         d -= 1
     path_states.append(states[0][0])
-    return (best_key, best_cost, np.array(path_states[::-1]), ctrls[np.array(path_ctrls[::-1])]), rollouts, depth
+    return (best_obj, best_cost, np.array(path_states[::-1]), ctrls[np.array(path_ctrls[::-1])]), rollouts, depth
 
 
 def thermal_values(model: SoaringModel, controls: np.ndarray) -> np.ndarray:
