@@ -59,6 +59,8 @@ class Demonstrations:
     :param episode: index of the plan each row belongs to.
     :param scenarios: the scenario names, in episode order.
     :param plan_costs: the reference cost of each plan [J/kg].
+    :param weights: the weight of each row in the fit (float32; 1 but for the states a DAgger round
+        visited, see :func:`demonstrations`).
     """
 
     observations: np.ndarray
@@ -67,6 +69,7 @@ class Demonstrations:
     episode: np.ndarray
     scenarios: tuple[str, ...]
     plan_costs: tuple[float, ...]
+    weights: np.ndarray
 
     def __len__(self) -> int:
         return int(self.observations.shape[0])
@@ -80,6 +83,7 @@ def demonstrations(
     gamma: float,
     to_policy_action: Callable[[Any], Any] | None = None,
     names: Sequence[str] | None = None,
+    visit_weight: float = 1.0,
 ) -> Demonstrations:
     """Replay the ``sampler`` plans of every reference file in ``reference_dir`` through ``make_env``.
 
@@ -90,8 +94,16 @@ def demonstrations(
     :param gamma: the learner's discount (for the returns-to-go).
     :param to_policy_action: the inverse of the training action transform (None: identity).
     :param names: only these scenarios (default: all files, sorted by name).
+    :param visit_weight: the weight of a DAgger plan's first imitated row, the state the policy
+        visited (the plan's other rows are the search's own states, weight 1). A round that labels
+        every k-th visited state samples the policy's states k times more sparsely than a plan's
+        rows sample the search's, so weight k restores DAgger's mixture of the two; without it one
+        label where a policy keeps circling at the top of a thermal ("leave") is outvoted by the
+        thousands of circling rows of the plans' climbs.
     :raises ConfigError: no usable plan, or a plan that does not reach the goal when replayed.
     """
+    if not (isinstance(visit_weight, (int, float)) and 0.0 < visit_weight < math.inf):
+        raise ConfigError(f"visit_weight={visit_weight!r} must be a finite number > 0")
     refs = load_references(reference_dir)
     if not refs:
         raise ConfigError(f"demos={str(reference_dir)!r}: no reference files there (run scripts/reference.py)")
@@ -100,6 +112,7 @@ def demonstrations(
     act_rows: list[Any] = []
     ret_rows: list[np.ndarray] = []
     ep_rows: list[np.ndarray] = []
+    w_rows: list[np.ndarray] = []
     used: list[str] = []
     costs: list[float] = []
     for name in chosen:
@@ -142,6 +155,10 @@ def demonstrations(
             g[k] = acc
         ret_rows.append(g[first:])
         ep_rows.append(np.full(len(rewards) - first, len(used), np.int64))
+        w = np.ones(len(rewards) - first, np.float32)
+        if first > 0:
+            w[0] = visit_weight
+        w_rows.append(w)
         used.append(name)
         costs.append(float(ref.best_cost))
     if not used:
@@ -157,6 +174,7 @@ def demonstrations(
         episode=np.concatenate(ep_rows),
         scenarios=tuple(used),
         plan_costs=tuple(costs),
+        weights=np.concatenate(w_rows),
     )
 
 
@@ -168,6 +186,7 @@ def rows(demos: Demonstrations, index: np.ndarray) -> Demonstrations:
         actions=demos.actions[index],
         returns=demos.returns[index],
         episode=demos.episode[index],
+        weights=demos.weights[index],
     )
 
 
@@ -193,29 +212,52 @@ def with_mirror_images(
         episode=np.concatenate([demos.episode, demos.episode + len(demos.scenarios)]),
         scenarios=demos.scenarios + tuple(f"{n}~mirror" for n in demos.scenarios),
         plan_costs=demos.plan_costs + demos.plan_costs,
+        weights=np.concatenate([demos.weights, demos.weights]),
     )
 
 
 def _visits(
-    scenarios: Sequence[Scenario], make_env: Callable[[Scenario], gym.Env], act: Callable[[Any], Any], every: int
-) -> Iterator[tuple[Scenario, int, Any, list[Any]]]:
-    """Fly each scenario once with ``act``; after every ``every``-th step while the episode runs,
-    yield (scenario, step, the raw env, the actions so far)."""
+    scenarios: Sequence[Scenario],
+    make_env: Callable[[Scenario], gym.Env],
+    act: Callable[[Any], Any],
+    every: int,
+    until: int | None = None,
+    failed_only: bool = False,
+) -> Iterator[tuple[Scenario, int, np.ndarray, list[Any]]]:
+    """Fly each scenario once with ``act``; after every ``every``-th step while the episode runs
+    (and, given ``until``, within its first ``until`` steps), yield (scenario, step, a copy of the
+    raw env's state, the actions so far).
+
+    With ``failed_only`` an episode's states are yielded only once it has ended without reaching
+    the goal (``info["is_success"]`` False), so a DAgger round spends its searches where the policy
+    fails.
+    """
     if int(every) < 1:
         raise ConfigError(f"every={every!r} must be >= 1")
+    if until is not None and int(until) < 1:
+        raise ConfigError(f"until={until!r} must be >= 1 (or None: the whole episode)")
     for sc in scenarios:
         env = make_env(sc)
         try:
             obs, _ = env.reset(seed=0)
             taken: list[Any] = []
+            held: list[tuple[Scenario, int, np.ndarray, list[Any]]] = []
             while True:
                 a = act(obs)
                 taken.append(a)
-                obs, _, terminated, truncated, _ = env.step(a)
+                obs, _, terminated, truncated, info = env.step(a)
                 if terminated or truncated:
+                    if failed_only and not info.get("is_success", False):
+                        yield from held
                     break
-                if len(taken) % every == 0:
-                    yield sc, len(taken), env.unwrapped, list(taken)
+                k = len(taken)
+                if k % every == 0 and (until is None or k <= until):
+                    raw: Any = env.unwrapped  # a SoaringEnv: its state (Pn, Pe, chi, h, ...)
+                    visit = (sc, k, np.array(raw.state, copy=True), list(taken))
+                    if failed_only:
+                        held.append(visit)
+                    else:
+                        yield visit
         finally:
             env.close()
 
@@ -227,6 +269,8 @@ def visited_starts(
     *,
     every: int,
     tag: str = "",
+    until: int | None = None,
+    failed_only: bool = False,
 ) -> list[Scenario]:
     """The states a policy visits, as scenarios that start there (DAgger's data, Ross et al. 2011).
 
@@ -243,10 +287,12 @@ def visited_starts(
     :param act: policy observation -> policy action.
     :param every: steps between recorded states (>= 1).
     :param tag: marks a DAgger round in the names (the policies of two rounds visit other states).
+    :param until: only states within the first this many steps (None: the whole episode).
+    :param failed_only: only states of episodes that end without reaching the goal.
     """
     out: list[Scenario] = []
-    for sc, k, base, _ in _visits(scenarios, make_env, act, every):
-        pn, pe, chi, h = (float(v) for v in np.asarray(base.state)[:4])
+    for sc, k, state, _ in _visits(scenarios, make_env, act, every, until, failed_only):
+        pn, pe, chi, h = (float(v) for v in state[:4])
         try:
             out.append(dataclasses.replace(sc, start=(pn, pe, chi, h), name=f"{sc.name}-{tag}s{k}"))
         except ConfigError:  # inside the goal region or outside the domain: nothing to plan
@@ -261,6 +307,8 @@ def visited_prefixes(
     *,
     every: int,
     tag: str = "",
+    until: int | None = None,
+    failed_only: bool = False,
 ) -> list[tuple[Scenario, list[Any]]]:
     """The states a policy visits, as the actions that reach them: DAgger for tasks whose state is
     more than the position (the cross-country battery, the time).
@@ -273,10 +321,11 @@ def visited_prefixes(
 
     :param make_env: the raw env (no policy transforms: the prefix is in env actions).
     :param act: observation -> env action.
+    :param every, tag, until, failed_only: as for :func:`visited_starts`.
     """
     return [
         (dataclasses.replace(sc, name=f"{sc.name}-{tag}s{k}"), taken)
-        for sc, k, _, taken in _visits(scenarios, make_env, act, every)
+        for sc, k, _, taken in _visits(scenarios, make_env, act, every, until, failed_only)
     ]
 
 
@@ -292,7 +341,8 @@ def pretrain(
     optimizer: Any = None,
 ) -> list[dict[str, float]]:
     """Fit an SB3 ``ActorCriticPolicy`` to ``demos``: the actor by the negative log-likelihood of the
-    demonstrated actions, the critic by least squares on the returns-to-go.
+    demonstrated actions, the critic by least squares on the returns-to-go, each row weighted by
+    ``demos.weights`` (a weighted mean per minibatch; with all weights 1 the plain mean).
 
     By default the policy's own optimizer is left alone (a fresh Adam here, so that PPO's starts
     clean); ``optimizer`` fits with a given one instead (PPO's, when rehearsing the demonstrations
@@ -315,6 +365,7 @@ def pretrain(
     obs = torch.as_tensor(demos.observations)
     act = torch.as_tensor(demos.actions)
     ret = torch.as_tensor(demos.returns)
+    wts = torch.as_tensor(demos.weights) if bool(np.any(demos.weights != 1.0)) else None
     opt = optimizer if optimizer is not None else torch.optim.Adam(policy.parameters(), lr=learning_rate)
     gen = np.random.default_rng(seed)
     n = len(demos)
@@ -326,8 +377,12 @@ def pretrain(
         for start in range(0, n, batch_size):
             idx = torch.as_tensor(order[start : start + batch_size])
             values, log_prob, _ = policy.evaluate_actions(obs[idx], act[idx])
-            nll = -log_prob.mean()
-            vloss = torch.mean((values.flatten() - ret[idx]) ** 2)
+            sq = (values.flatten() - ret[idx]) ** 2
+            if wts is None:
+                nll, vloss = -log_prob.mean(), torch.mean(sq)
+            else:
+                wb = wts[idx]
+                nll, vloss = -(wb * log_prob).sum() / wb.sum(), (wb * sq).sum() / wb.sum()
             loss = nll + value_weight * vloss
             opt.zero_grad()
             loss.backward()

@@ -135,6 +135,9 @@ class TrainConfig:
         continuous policy's spread is then reset to ``log_std_init``. None (default): no cloning.
     :param demo_mirror: continuous and grid: clone the mirror images of the plans too (east ->
         -east, every turn reversed; :func:`baselines.imitation.with_mirror_images`).
+    :param demo_visit_weight: the weight of each DAgger plan's first row, the state the policy
+        visited, in the cloning (:func:`baselines.imitation.demonstrations`; e.g. the round's
+        ``--every``). 1 (default): every row alike.
     :param demo_epochs: passes of the behaviour cloning over the demonstrations (0: none, e.g. to
         rehearse the demonstrations of a policy that ``init_from`` cloned before).
     :param demo_learning_rate: Adam step size of the behaviour cloning.
@@ -176,6 +179,7 @@ class TrainConfig:
     init_from: str | None = None
     demos: str | None = None
     demo_mirror: bool = True
+    demo_visit_weight: float = 1.0
     demo_epochs: int = 200
     demo_learning_rate: float = 1e-3
     demo_rehearsal: int = 0
@@ -225,6 +229,9 @@ class TrainConfig:
             raise ValueError(f"demo_rehearsal={self.demo_rehearsal!r} must be an integer >= 0")
         if self.demo_rehearsal and self.demos is None:
             raise ValueError("demo_rehearsal needs demos")
+        w = self.demo_visit_weight
+        if isinstance(w, bool) or not isinstance(w, (int, float)) or not 0.0 < w < math.inf:
+            raise ValueError(f"demo_visit_weight={w!r} must be a finite number > 0")
         if not isinstance(self.demo_mirror, bool):
             raise ValueError(f"demo_mirror={self.demo_mirror!r} must be true or false")
         if int(self.demo_epochs) < 0 or not 0.0 < float(self.demo_learning_rate) < 1.0:
@@ -929,6 +936,7 @@ def _clone_demos(model: Any, config: TrainConfig, out: Path) -> tuple[dict[str, 
         sampler="continuous" if config.algo in CONTINUOUS_ALGOS else "primitive",
         gamma=config.gamma,
         to_policy_action=to_policy_action,
+        visit_weight=float(config.demo_visit_weight),
     )
     mirrored = bool(config.demo_mirror and config.algo in CONTINUOUS_ALGOS)
     demos = plans

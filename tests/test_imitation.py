@@ -24,7 +24,7 @@ from baselines.ppo import (
     turn_curve,
 )
 from baselines.reference import ReferenceConfig, compute_reference, load_reference, save_reference
-from baselines.reference.tasks import XC_DEMO_TIME_WEIGHT
+from baselines.reference.tasks import XC_DEMO_MIN_HEIGHT, XC_DEMO_TIME_WEIGHT
 from soaring_env._validation import ConfigError
 from soaring_env.physics.thermals import Thermal, WindField
 from soaring_env.scenario import Bounds, GoalRegion, Scenario
@@ -124,7 +124,8 @@ def test_cloning_fits_the_demonstrations(ref_dir: Path, algo: str, tmp_path: Pat
     env = _env(env_id)(SCENARIOS[0])
     torch.manual_seed(0)
     model = PPO("MlpPolicy", env, seed=0, device="cpu", policy_kwargs={"net_arch": [64, 64]})
-    log = pretrain(model.policy, demos, epochs=1000, learning_rate=3e-3, seed=0)
+    # 2,000 epochs: at 1,000 the continuous fit was still 0.085 off on one row on some machines
+    log = pretrain(model.policy, demos, epochs=2000, learning_rate=3e-3, seed=0)
     assert log[-1]["nll"] < log[0]["nll"] and log[-1]["value_mse"] < log[0]["value_mse"]
     pred, _ = model.predict(demos.observations, deterministic=True)
     if algo == "discrete":
@@ -140,6 +141,43 @@ def test_cloning_fits_the_demonstrations(ref_dir: Path, algo: str, tmp_path: Pat
     assert fits[0][0] == fits[1][0]
     assert all(torch.equal(v, fits[1][1][k]) for k, v in fits[0][1].items())
     env.close()
+
+
+def test_weighted_cloning_fits_the_weighted_mean_of_conflicting_labels() -> None:
+    """Closed form: for one observation labelled a1 with weight w1 and a2 with weight w2, the
+    Gaussian log-likelihood is largest at the mean (w1 a1 + w2 a2) / (w1 + w2); the discrete
+    cross-entropy at the probabilities w1 / (w1 + w2) and w2 / (w1 + w2)."""
+    import torch
+    from stable_baselines3 import PPO
+
+    from baselines.imitation import Demonstrations
+
+    for env_id, labels, check in (
+        (CONTINUOUS_ID, np.array([[-0.6, 0.3, 0.0], [0.6, -0.3, 0.0]], np.float32), "mean"),
+        (DISCRETE_ID, np.array([3, 40], np.int64), "probs"),
+    ):
+        env = _env(env_id)(SCENARIOS[0])
+        obs, _ = env.reset(seed=0)
+        demos = Demonstrations(
+            observations=np.stack([obs, obs]).astype(np.float32),
+            actions=labels,
+            returns=np.zeros(2, np.float32),
+            episode=np.array([0, 1]),
+            scenarios=("a", "b"),
+            plan_costs=(0.0, 0.0),
+            weights=np.array([3.0, 1.0], np.float32),
+        )
+        torch.manual_seed(0)
+        model = PPO("MlpPolicy", env, seed=0, device="cpu", policy_kwargs={"net_arch": [16]})
+        pretrain(model.policy, demos, epochs=600, learning_rate=1e-2, batch_size=2, seed=0)
+        with torch.no_grad():
+            dist = model.policy.get_distribution(torch.as_tensor(demos.observations[:1])).distribution
+        if check == "mean":
+            assert np.allclose(dist.mean.numpy()[0], 0.75 * labels[0] + 0.25 * labels[1], atol=0.02)
+        else:
+            p = dist.probs.numpy()[0]
+            assert abs(p[3] - 0.75) < 0.02 and abs(p[40] - 0.25) < 0.02
+        env.close()
 
 
 def _tiny_run(algo: str, ref_dir: Path, **kwargs: object) -> TrainConfig:
@@ -174,6 +212,9 @@ def test_train_with_demos_saves_the_cloned_start(ref_dir: Path, tmp_path: Path) 
         TrainConfig(demo_rehearsal=2)
     with pytest.raises(ValueError, match="demo_mirror"):
         TrainConfig(demos=str(ref_dir), demo_mirror="yes")
+    for bad in (0, -2.0, float("nan"), float("inf"), "30", True):
+        with pytest.raises(ValueError, match="demo_visit_weight"):
+            TrainConfig(demos=str(ref_dir), demo_visit_weight=bad)
     with pytest.raises(ValueError, match="demo_epochs"):
         TrainConfig(demo_epochs=-1)
 
@@ -264,6 +305,34 @@ def test_dagger_starts_are_the_visited_states() -> None:
     assert [s.start for s in starts[:3]] == [states[1], states[3], states[5]]
     with pytest.raises(ConfigError, match="every"):
         visited_starts([sc], lambda s: gym.make(CONTINUOUS_ID, scenario=s), lambda obs: None, every=0)
+    with pytest.raises(ConfigError, match="until"):
+        visited_starts([sc], lambda s: gym.make(CONTINUOUS_ID, scenario=s), lambda obs: None, every=1, until=0)
+
+
+def test_dagger_round_restricted_to_the_first_steps_and_to_failed_episodes(ref_dir: Path) -> None:
+    """``until`` keeps the states within the first steps; ``failed_only`` keeps an episode's states
+    only when it misses the goal, and then the same states as without it."""
+    import gymnasium as gym
+
+    from baselines.imitation import visited_prefixes, visited_starts
+
+    sc = SCENARIOS[0]
+    make = lambda s: gym.make(CONTINUOUS_ID, scenario=s)  # noqa: E731
+    CIRCLE = np.array([0.0, 2.0 / 3.0, 0.0], np.float32)  # never reaches the goal: the episode fails
+    every = visited_starts([sc], make, lambda obs: CIRCLE, every=2, tag="r1")
+    early = visited_starts([sc], make, lambda obs: CIRCLE, every=2, tag="r1", until=5)
+    assert [s.name for s in early] == ["tiny-0-r1s2", "tiny-0-r1s4"] and early == every[:2]
+    failed = visited_starts([sc], make, lambda obs: CIRCLE, every=2, tag="r1", failed_only=True)
+    assert failed == every and len(failed) >= 3
+    prefixes = visited_prefixes([sc], make, lambda obs: CIRCLE, every=2, tag="r1", until=5, failed_only=True)
+    assert [(s.name, len(p)) for s, p in prefixes] == [("tiny-0-r1s2", 2), ("tiny-0-r1s4", 4)]
+    # a policy that flies the reference plan reaches the goal: no state of that episode is kept
+    plan = json.loads((ref_dir / "tiny-0.json").read_text())["samplers"]["continuous"]["actions"]
+    assert len(plan) >= 3
+    for failed_only, kept in ((False, len(plan) - 1), (True, 0)):  # no state after the goal step
+        steps = iter(np.asarray(plan, np.float32))
+        got = visited_starts([sc], make, lambda obs, it=steps: next(it), every=1, failed_only=failed_only)
+        assert len(got) == kept
 
 
 def test_mirror_images_are_the_plans_of_the_mirrored_scenarios(ref_dir: Path) -> None:
@@ -326,6 +395,7 @@ def test_demos_cli_plans_resumes_and_runs_a_dagger_round(
     xc_ref = load_reference(xc_out / "xc-20000.json")
     assert set(xc_ref.samplers) == {"continuous"} and xc_ref.samplers["continuous"].settings["progress_weight"] > 0
     assert xc_ref.samplers["continuous"].settings["time_weight"] == XC_DEMO_TIME_WEIGHT  # the demonstrator's
+    assert xc_ref.samplers["continuous"].settings["min_height"] == XC_DEMO_MIN_HEIGHT
     for bad, field in (
         (["--scenarios", "0"], "--scenarios"),
         (["--every", "0"], "--every"),
@@ -335,6 +405,9 @@ def test_demos_cli_plans_resumes_and_runs_a_dagger_round(
         (["--time-weight", "1"], "--time-weight"),  # goal reaching: none
         (["--task", "xc", "--time-weight", "-1"], "time_weight"),
         (["--task", "xc", "--time-weight", "nan"], "time_weight"),
+        (["--min-height", "100"], "--min-height"),  # goal reaching: none
+        (["--task", "xc", "--min-height", "-5"], "min_height"),
+        (["--until", "0"], "--until"),
     ):
         with pytest.raises(SystemExit) as exc:
             main([*bad, *common])
@@ -409,6 +482,8 @@ def test_cross_country_plans_clone_into_the_grid_policy(tmp_path: Path) -> None:
         task_reference(xc, XC_TINY, 16, prefix=[[float("nan"), 0.0, 0.0]])
     with pytest.raises(ConfigError, match="time_weight"):  # the goal-reaching search takes no time weight
         reference_config(gym.make(CONTINUOUS_ID), 16, time_weight=1.0)
+    with pytest.raises(ConfigError, match="min_height"):  # nor a floor
+        reference_config(gym.make(CONTINUOUS_ID), 16, min_height=100.0)
     prompt = task_reference(xc, XC_TINY, beam_width=16, time_weight=XC_DEMO_TIME_WEIGHT).samplers["continuous"]
     assert prompt.settings["time_weight"] == XC_DEMO_TIME_WEIGHT
     assert math.isfinite(prompt.best_cost) and prompt.flight_time <= plan.flight_time
@@ -452,5 +527,13 @@ def test_cross_country_dagger_plans_from_the_visited_state_with_its_battery(tmp_
     demos = demonstrations(tmp_path, lambda s: gym.make(xc, scenario=s), sampler="continuous", gamma=0.99)
     assert len(demos) == len(plan.actions) - len(prefix)
     assert np.array_equal(demos.observations[0], obs)  # the first imitated row: the visited state
+    assert demos.weights.dtype == np.float32 and np.all(demos.weights == 1.0)
+    xc_env = lambda s: gym.make(xc, scenario=s)  # noqa: E731
+    heavy = demonstrations(tmp_path, xc_env, sampler="continuous", gamma=0.99, visit_weight=30)
+    assert heavy.weights[0] == 30.0 and np.all(heavy.weights[1:] == 1.0)  # only the visited state
+    assert np.array_equal(heavy.observations, demos.observations)
+    for bad in (0.0, -1.0, float("nan"), float("inf"), "30"):
+        with pytest.raises(ConfigError, match="visit_weight"):
+            demonstrations(tmp_path, xc_env, sampler="continuous", gamma=0.99, visit_weight=bad)
     with pytest.raises(ConfigError, match="prefix: the episode ends"):
         task_reference(xc, sc, beam_width=16, prefix=[level] * 400)

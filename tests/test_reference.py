@@ -44,9 +44,12 @@ TINY = Scenario(
 SUBSET = (0, 1, 2, 5, 6, 7, 12, 22, 37, 47, 57, 67)
 
 
-def _enumerate(model: SoaringModel, prims: tuple[int, ...], depth: int, time_weight: float = 0.0) -> float:
+def _enumerate(
+    model: SoaringModel, prims: tuple[int, ...], depth: int, time_weight: float = 0.0, min_height: float = 0.0
+) -> float:
     """Brute force: the cheapest primitive sequence of at most ``depth`` edges that reaches the goal
-    (its cost; with ``time_weight``: the least cost + time_weight x flight time)."""
+    (its cost; with ``time_weight``: the least cost + time_weight x flight time; with
+    ``min_height``: no edge but a goal edge ends below it while descending)."""
     problem = SoaringProblem(model, "primitive")
     ctrls = np.array(prims, dtype=np.float64)[:, None]
     x = problem.root_state()[None, :]
@@ -62,6 +65,8 @@ def _enumerate(model: SoaringModel, prims: tuple[int, ...], depth: int, time_wei
         if goal.any():
             best = min(best, float((jj + time_weight * tt)[goal].min()))
         ok = e.outcome == EDGE_VALID
+        h0, h1 = np.repeat(x[:, S_H], m), e.states[:, S_H]
+        ok &= (h1 >= min_height) | (h1 >= h0)
         x, j, t = e.states[ok], jj[ok], tt[ok]
     return best
 
@@ -110,6 +115,31 @@ def test_time_weight_finds_the_enumerated_optimum(tiny: SoaringModel, time_weigh
     assert res.cost + time_weight * flight_time == pytest.approx(exact, abs=1e-9)
     cheapest = search(tiny, "primitive", cfg)
     assert res.cost >= cheapest.cost - 1e-9 and len(res.plan) <= len(cheapest.plan)
+
+
+@pytest.mark.parametrize(("min_height", "binds"), [(300.0, False), (380.0, True), (450.0, True)])
+def test_min_height_finds_the_enumerated_optimum_above_the_floor(min_height: float, binds: bool) -> None:
+    """With a floor the exhaustive search finds the brute-force optimum among the plans that keep
+    above it (or climb where they are below it: 450 m is above the start), and its plan does; from
+    420 m to a goal at 260 m the cheapest plan glides down, so the higher floors cost more."""
+    high = SoaringModel(scenario=dataclasses.replace(TINY, start=(0.0, 0.0, 0.0, 420.0)))
+    exact = _enumerate(high, SUBSET, 3, min_height=min_height)
+    free = _enumerate(high, SUBSET, 3)
+    assert math.isfinite(exact) and (exact > free + 1.0 if binds else exact == free)
+    cfg = ReferenceConfig(
+        beam_width=len(SUBSET) ** 3,
+        start_width=len(SUBSET) ** 3,
+        max_edges=3,
+        cell_size=1.0,
+        height_cell=0.2,
+        course_cells=720,
+        primitives=SUBSET,
+        min_height=min_height,
+    )
+    res = search(high, "primitive", cfg)
+    assert res.cost == pytest.approx(exact, abs=1e-9)
+    h = res.plan.states[:, S_H]
+    assert all(h[k + 1] >= min_height or h[k + 1] >= h[k] for k in range(len(h) - 2))  # but the goal edge
 
 
 def test_default_cells_never_beat_the_optimum(tiny: SoaringModel) -> None:
@@ -335,6 +365,8 @@ def test_planner_seed_makes_the_primitive_reference_no_worse_than_the_planner(ti
         ({"time_weight": -1.0}, "time_weight"),
         ({"time_weight": float("nan")}, "time_weight"),
         ({"time_weight": "1"}, "time_weight"),
+        ({"min_height": -1.0}, "min_height"),
+        ({"min_height": float("inf")}, "min_height"),
     ],
 )
 def test_bad_settings_name_the_field(kwargs: dict, field: str) -> None:

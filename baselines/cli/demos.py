@@ -6,6 +6,9 @@ the states a trained policy visits.
     # a DAgger round: fly a run's policy on the same scenarios, plan again from every 4th state it visits
     python scripts/demos.py --scenarios 200 --dagger results/ppo-bc/grid --every 4 --tag r1 \\
         --out results/reference-train
+    # ... or only from the episodes it fails, every 10th state within the first 120 steps
+    python scripts/demos.py --task xc --scenarios 200 --dagger results/ppo-bc-xc/r1/grid --every 10 --until 120 \
+        --failed-only --tag f1 --out results/reference-train-xc
     # cross-country: the task's own reference (battery, its control set) on xc-20000 ...
     python scripts/demos.py --task xc --scenarios 200 --out results/reference-train-xc
 
@@ -31,7 +34,7 @@ from baselines.evaluation import PPO_MODELS
 from baselines.imitation import DEMO_SEED0, demo_reference_config, visited_starts
 from baselines.reference import ReferenceConfig
 from baselines.reference.runner import reference_table, run_references
-from baselines.reference.tasks import XC_DEMO_TIME_WEIGHT, reference_config
+from baselines.reference.tasks import XC_DEMO_MIN_HEIGHT, XC_DEMO_TIME_WEIGHT, reference_config
 from soaring_env._validation import ConfigError
 from soaring_env.scenario import atomic_write_text, get_scenario
 
@@ -56,15 +59,27 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help=f"--task xc: the search's time weight [J/kg per s] (default {XC_DEMO_TIME_WEIGHT:g}; 0: least energy)",
     )
+    p.add_argument(
+        "--min-height",
+        type=float,
+        default=None,
+        help=f"--task xc: the search's floor [m] (default {XC_DEMO_MIN_HEIGHT:g}; 0: down to the ground)",
+    )
     p.add_argument("--dagger", default=None, metavar="RUN", help="plan from the states this PPO run visits")
     p.add_argument("--ppo-model", choices=PPO_MODELS, default="final", help="which model of RUN")
     p.add_argument("--every", type=int, default=4, help="with --dagger: every this many steps (default 4)")
+    p.add_argument(
+        "--until", type=int, default=None, help="with --dagger: only states within the first this many steps"
+    )
+    p.add_argument(
+        "--failed-only", action="store_true", help="with --dagger: only states of episodes that miss the goal"
+    )
     p.add_argument("--tag", default="", help="with --dagger: marks the round in the names (<name>-<tag>s<k>)")
     p.add_argument("--out", type=Path, default=Path("results/reference-train"), help="output directory")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_backend_args(p, "one per CPU core")
     args = p.parse_args(argv)
-    check_cli_args(p, args, counts=("scenarios", "beam_width", "every", "workers"), dirs=("out",))
+    check_cli_args(p, args, counts=("scenarios", "beam_width", "every", "until", "workers"), dirs=("out",))
     if args.first < 0:
         p.error(f"--first={args.first} must be >= 0")
     if not args.tag.isalnum() and args.tag != "":
@@ -72,8 +87,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         env_id, family = DEMO_TASKS[args.task]
         if env_id is None:
-            if args.time_weight:
-                p.error(f"--time-weight={args.time_weight!r}: goal-reaching demonstrations take none (--task xc only)")
+            for flag, v in (("--time-weight", args.time_weight), ("--min-height", args.min_height)):
+                if v:
+                    p.error(f"{flag}={v!r}: goal-reaching demonstrations take none (--task xc only)")
             cfg = demo_reference_config(args.beam_width)
         else:
             import gymnasium as gym
@@ -82,7 +98,8 @@ def main(argv: list[str] | None = None) -> int:
             env_id = ids[args.sampler]
             probe = gym.make(env_id)
             tw = XC_DEMO_TIME_WEIGHT if args.time_weight is None else args.time_weight
-            task_cfg = reference_config(probe, args.beam_width, tw)
+            floor = XC_DEMO_MIN_HEIGHT if args.min_height is None else args.min_height
+            task_cfg = reference_config(probe, args.beam_width, tw, floor)
             probe.close()
             assert isinstance(task_cfg, ReferenceConfig)
             cfg = task_cfg
@@ -141,11 +158,12 @@ def _dagger_starts(args: argparse.Namespace, scenarios: list, task: bool) -> tup
     def act(obs):  # type: ignore[no-untyped-def]
         return agent.predict(obs)[0]
 
+    visits = {"every": args.every, "tag": args.tag, "until": args.until, "failed_only": args.failed_only}
     if task:
-        found = visited_prefixes(scenarios, make, act, every=args.every, tag=args.tag)
+        found = visited_prefixes(scenarios, make, act, **visits)
         starts, prefixes = [sc for sc, _ in found], {sc.name: prefix for sc, prefix in found}
     else:
-        starts, prefixes = visited_starts(scenarios, make, act, every=args.every, tag=args.tag), {}
+        starts, prefixes = visited_starts(scenarios, make, act, **visits), {}
     print(f"dagger: {len(starts)} states visited by {agent.model_path} on {len(scenarios)} scenarios", flush=True)
     return starts, prefixes
 

@@ -123,6 +123,12 @@ class ReferenceConfig:
         earlier arrival wins (a plan that circles at the top of a thermal, where lift and sink cancel,
         is then no longer as good as one that glides on at once). The reported cost stays the plan's
         energy cost. 0 (default): least energy, as the yardstick's references are published.
+    :param min_height: a floor [m]: an edge may end below it only if it does not descend (end
+        height >= start height), so plans keep that much height in reserve and a start below it
+        climbs first -- the engine-start height of motor-glider practice. A learner that copies the
+        plans, with errors in judging its glide, then still has height to use the motor when its
+        glide misses the lift. Goal edges are exempt (the goal region may reach lower). 0
+        (default): down to the ground, as the yardstick's references are published.
     :param planner_iterations: for the primitives (:func:`~baselines.reference.compute_reference`;
         :func:`search` takes its seeds as arguments): random expansions of a deterministic run of
         the soaring SST (seed 0, :func:`baselines.sst.plan_soaring`) whose plan seeds the search
@@ -146,10 +152,12 @@ class ReferenceConfig:
     planner_iterations: int = 0
     progress_weight: float = 0.0
     time_weight: float = 0.0
+    min_height: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "progress_weight", check_range("progress_weight", self.progress_weight, 0.0, 100.0))
         object.__setattr__(self, "time_weight", check_range("time_weight", self.time_weight, 0.0, 1000.0))
+        object.__setattr__(self, "min_height", check_range("min_height", self.min_height, 0.0, 5000.0))
         check_positive("region_size", self.region_size)
         check_int("region_quota", self.region_quota, 0)
         check_int("planner_iterations", self.planner_iterations, 0)
@@ -475,6 +483,10 @@ def _beam(
         forced = np.array(sorted({c for c in seed_child if c >= 0}), dtype=np.int64)
         # 3. valid children; admissible pruning (module docstring)
         valid = (out == EDGE_VALID) & (obj - G * (h_cap - end[:, S_H]) < best_obj)
+        if cfg.min_height:  # the floor: below it only edges that do not descend
+            above = (end[:, S_H] >= cfg.min_height) | (end[:, S_H] >= x[par, S_H])
+            valid &= above
+            forced = forced[above[forced]]
         if ctx.battery != math.inf:  # C' = J + g (h - h_0): the motor energy so far
             charged = j + G * (end[:, S_H] - root[S_H]) < ctx.battery
             valid &= charged

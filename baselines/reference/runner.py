@@ -34,7 +34,8 @@ def _job(args: tuple[dict[str, Any], tuple[str, ...], dict[str, Any], str | None
     sc_dict, samplers, cfg_dict, env_id, prefix = args
     if env_id is not None:  # a task's own search (its control set, battery and time limit)
         sc = Scenario.from_dict(sc_dict)
-        return task_reference(env_id, sc, int(cfg_dict["beam_width"]), prefix, float(cfg_dict["time_weight"]))
+        width, tw, floor = int(cfg_dict["beam_width"]), float(cfg_dict["time_weight"]), float(cfg_dict["min_height"])
+        return task_reference(env_id, sc, width, prefix, tw, floor)
     return compute_reference(Scenario.from_dict(sc_dict), samplers, ReferenceConfig(**cfg_dict))
 
 

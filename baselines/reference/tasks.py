@@ -46,6 +46,10 @@ XC_START_WIDTH = 125
 #: the time limit nears (a choice a policy cannot copy: it depends on the minutes left, not on
 #: what the lift does). The results table's reference keeps 0: the least energy.
 XC_DEMO_TIME_WEIGHT = 1.0
+#: Floor [m] of the cross-country demonstrations (ReferenceConfig.min_height): the least-energy
+#: plans glide to a thermal with a few dozen metres to spare (a quarter of them below 100 m), a
+#: margin a cloned policy's judgement does not have; above the floor it can still motor on.
+XC_DEMO_MIN_HEIGHT = 150.0
 #: Bumped when the tasks' reference settings change (records of another version are redone).
 REFERENCE_VERSION = 2
 
@@ -57,15 +61,17 @@ def goal_config(beam_width: int) -> ReferenceConfig:
 
 
 def reference_config(
-    env: gym.Env, beam_width: int = DEFAULT_BEAM_WIDTH, time_weight: float = 0.0
+    env: gym.Env, beam_width: int = DEFAULT_BEAM_WIDTH, time_weight: float = 0.0, min_height: float = 0.0
 ) -> HorizonConfig | ReferenceConfig:
     """The reference search settings of a task env, or of the goal-reaching env (the yardstick's
-    :class:`ReferenceConfig` with ``beam_width``); ``time_weight`` [J/kg per s]: the cross-country
-    search's (:attr:`ReferenceConfig.time_weight`; the other tasks refuse any but 0)."""
+    :class:`ReferenceConfig` with ``beam_width``); ``time_weight`` [J/kg per s] and ``min_height``
+    [m]: the cross-country search's (:attr:`ReferenceConfig.time_weight`, ``.min_height``; the
+    other tasks refuse any but 0)."""
     base: Any = env.unwrapped
     xc = base.has_goal and getattr(base, "has_battery", False)
-    if time_weight != 0.0 and not xc:
-        raise ConfigError(f"time_weight={time_weight!r}; allowed: 0 (only the cross-country search has one)")
+    for name, v in (("time_weight", time_weight), ("min_height", min_height)):
+        if v != 0.0 and not xc:
+            raise ConfigError(f"{name}={v!r}; allowed: 0 (only the cross-country search has one)")
     if not base.has_goal:
         return HorizonConfig(beam_width=beam_width)
     if not xc:
@@ -75,11 +81,11 @@ def reference_config(
     kw: dict[str, Any] = {"beam_width": beam_width, "start_width": min(XC_START_WIDTH, beam_width), "max_edges": steps}
     if base.continuous:
         kw.update(speeds=XC_SPEEDS, turns_deg=XC_TURNS_DEG, gammas_deg=(0.0,))
-    return ReferenceConfig(**kw, progress_weight=XC_PROGRESS_WEIGHT, time_weight=time_weight)
+    return ReferenceConfig(**kw, progress_weight=XC_PROGRESS_WEIGHT, time_weight=time_weight, min_height=min_height)
 
 
 def reference_plan(
-    env: gym.Env, beam_width: int = DEFAULT_BEAM_WIDTH, time_weight: float = 0.0
+    env: gym.Env, beam_width: int = DEFAULT_BEAM_WIDTH, time_weight: float = 0.0, min_height: float = 0.0
 ) -> tuple[list[Any], dict[str, Any]]:
     """The reference search's plan from the state ``env`` is in: (env actions, stats).
 
@@ -91,12 +97,12 @@ def reference_plan(
     (``-energy_spent`` when replayed through ``env.step`` from a reset); ``stats["found"]`` whether
     it reaches the goal (goal tasks).
 
-    :param time_weight: see :func:`reference_config`.
+    :param time_weight, min_height: see :func:`reference_config`.
     :raises ConfigError: a thermal climb that is not at its start.
     """
     base: Any = env.unwrapped
     sampler = "continuous" if base.continuous else "primitive"
-    cfg = reference_config(env, beam_width, time_weight)
+    cfg = reference_config(env, beam_width, time_weight, min_height)
     t0 = time.perf_counter()
     stats: dict[str, Any]
     if isinstance(cfg, HorizonConfig):
@@ -134,6 +140,7 @@ def task_reference(
     beam_width: int = DEFAULT_BEAM_WIDTH,
     prefix: Sequence[Any] = (),
     time_weight: float = 0.0,
+    min_height: float = 0.0,
 ) -> ScenarioReference:
     """The reference plan of a goal task (``env_id``, e.g. the cross-country's) in ``scenario``, as
     the content of a reference file: the env's action set only, its ``best_cost`` the energy the
@@ -145,6 +152,7 @@ def task_reference(
         their number.
     :param time_weight: the search's time weight [J/kg per s] (:func:`reference_config`;
         :data:`XC_DEMO_TIME_WEIGHT` for demonstrations), recorded in the file's settings.
+    :param min_height: the search's floor [m] (likewise; :data:`XC_DEMO_MIN_HEIGHT`).
     :raises ConfigError: a task without a goal (the thermal climb has no plan to reach anything),
         or a prefix that ends the episode.
     """
@@ -167,9 +175,9 @@ def task_reference(
             _, _, terminated, truncated, _ = env.step(a)
             if terminated or truncated:
                 raise ConfigError(f"prefix: the episode ends at step {k + 1} of {len(prefix)}; nothing to plan")
-        settings = reference_config(env, beam_width, time_weight)
+        settings = reference_config(env, beam_width, time_weight, min_height)
         assert isinstance(settings, ReferenceConfig)
-        suffix, stats = reference_plan(env, beam_width, time_weight)
+        suffix, stats = reference_plan(env, beam_width, time_weight, min_height)
         actions = [*prefix, *suffix]
         cost = math.inf
         if stats["found"]:  # the whole plan, flown from the reset: the energy it spends
