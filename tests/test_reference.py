@@ -95,12 +95,10 @@ def test_search_finds_the_enumerated_optimum(tiny: SoaringModel, depth: int) -> 
     assert res.plan.solved and len(res.plan) <= depth
 
 
-@pytest.mark.parametrize("time_weight", [2.0, 40.0])
-def test_time_weight_finds_the_enumerated_optimum(tiny: SoaringModel, time_weight: float) -> None:
-    """With a time weight the exhaustive search minimizes cost + weight x flight time (brute force),
-    reports the plan's energy cost, and at a large weight takes a plan no longer than the cheapest."""
-    exact = _enumerate(tiny, SUBSET, 3, time_weight)
-    cfg = ReferenceConfig(
+def _exhaustive_config(**kwargs: float) -> ReferenceConfig:
+    """Settings under which the search keeps every 3-edge plan of SUBSET (cells far finer than the
+    spread of its end states), so it must find the brute-force optimum."""
+    return ReferenceConfig(
         beam_width=len(SUBSET) ** 3,
         start_width=len(SUBSET) ** 3,
         max_edges=3,
@@ -108,7 +106,16 @@ def test_time_weight_finds_the_enumerated_optimum(tiny: SoaringModel, time_weigh
         height_cell=0.2,
         course_cells=720,
         primitives=SUBSET,
+        **kwargs,
     )
+
+
+@pytest.mark.parametrize("time_weight", [2.0, 40.0])
+def test_time_weight_finds_the_enumerated_optimum(tiny: SoaringModel, time_weight: float) -> None:
+    """With a time weight the exhaustive search minimizes cost + weight x flight time (brute force),
+    reports the plan's energy cost, and at a large weight takes a plan no longer than the cheapest."""
+    exact = _enumerate(tiny, SUBSET, 3, time_weight)
+    cfg = _exhaustive_config()
     res = search(tiny, "primitive", dataclasses.replace(cfg, time_weight=time_weight))
     assert res.cost == pytest.approx(float(np.sum(res.plan.edge_costs)), abs=1e-9)  # energy, not objective
     flight_time = float(res.plan.times[-1] - res.plan.times[0])
@@ -126,17 +133,7 @@ def test_min_height_finds_the_enumerated_optimum_above_the_floor(min_height: flo
     exact = _enumerate(high, SUBSET, 3, min_height=min_height)
     free = _enumerate(high, SUBSET, 3)
     assert math.isfinite(exact) and (exact > free + 1.0 if binds else exact == free)
-    cfg = ReferenceConfig(
-        beam_width=len(SUBSET) ** 3,
-        start_width=len(SUBSET) ** 3,
-        max_edges=3,
-        cell_size=1.0,
-        height_cell=0.2,
-        course_cells=720,
-        primitives=SUBSET,
-        min_height=min_height,
-    )
-    res = search(high, "primitive", cfg)
+    res = search(high, "primitive", _exhaustive_config(min_height=min_height))
     assert res.cost == pytest.approx(exact, abs=1e-9)
     h = res.plan.states[:, S_H]
     assert all(h[k + 1] >= min_height or h[k + 1] >= h[k] for k in range(len(h) - 2))  # but the goal edge
