@@ -35,7 +35,7 @@ import numpy as np
 
 from baselines.reference import ReferenceConfig, load_references
 from baselines.reference.tasks import goal_config
-from soaring_env._validation import ConfigError
+from soaring_env._validation import ConfigError, check_int, check_positive
 from soaring_env.scenario import Scenario
 
 #: Seed of the first training scenario of the demonstrations (``random-20000``).
@@ -102,8 +102,7 @@ def demonstrations(
         thousands of circling rows of the plans' climbs.
     :raises ConfigError: no usable plan, or a plan that does not reach the goal when replayed.
     """
-    if not (isinstance(visit_weight, (int, float)) and 0.0 < visit_weight < math.inf):
-        raise ConfigError(f"visit_weight={visit_weight!r} must be a finite number > 0")
+    visit_weight = check_positive("visit_weight", visit_weight)
     refs = load_references(reference_dir)
     if not refs:
         raise ConfigError(f"demos={str(reference_dir)!r}: no reference files there (run scripts/reference.py)")
@@ -232,10 +231,9 @@ def _visits(
     the goal (``info["is_success"]`` False), so a DAgger round spends its searches where the policy
     fails.
     """
-    if int(every) < 1:
-        raise ConfigError(f"every={every!r} must be >= 1")
-    if until is not None and int(until) < 1:
-        raise ConfigError(f"until={until!r} must be >= 1 (or None: the whole episode)")
+    every = check_int("every", every, 1)
+    if until is not None:
+        until = check_int("until", until, 1)
     for sc in scenarios:
         env = make_env(sc)
         try:

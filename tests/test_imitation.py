@@ -305,8 +305,9 @@ def test_dagger_starts_are_the_visited_states() -> None:
     assert [s.start for s in starts[:3]] == [states[1], states[3], states[5]]
     with pytest.raises(ConfigError, match="every"):
         visited_starts([sc], lambda s: gym.make(CONTINUOUS_ID, scenario=s), lambda obs: None, every=0)
-    with pytest.raises(ConfigError, match="until"):
-        visited_starts([sc], lambda s: gym.make(CONTINUOUS_ID, scenario=s), lambda obs: None, every=1, until=0)
+    for bad in (0, 2.5, "2", True):
+        with pytest.raises(ConfigError, match="until"):
+            visited_starts([sc], lambda s: gym.make(CONTINUOUS_ID, scenario=s), lambda obs: None, every=1, until=bad)
 
 
 def test_dagger_round_restricted_to_the_first_steps_and_to_failed_episodes(ref_dir: Path) -> None:
@@ -532,7 +533,7 @@ def test_cross_country_dagger_plans_from_the_visited_state_with_its_battery(tmp_
     heavy = demonstrations(tmp_path, xc_env, sampler="continuous", gamma=0.99, visit_weight=30)
     assert heavy.weights[0] == 30.0 and np.all(heavy.weights[1:] == 1.0)  # only the visited state
     assert np.array_equal(heavy.observations, demos.observations)
-    for bad in (0.0, -1.0, float("nan"), float("inf"), "30"):
+    for bad in (0.0, -1.0, float("nan"), float("inf"), "30", True):
         with pytest.raises(ConfigError, match="visit_weight"):
             demonstrations(tmp_path, xc_env, sampler="continuous", gamma=0.99, visit_weight=bad)
     with pytest.raises(ConfigError, match="prefix: the episode ends"):
