@@ -47,7 +47,7 @@ XC_START_WIDTH = 125
 #: what the lift does). The results table's reference keeps 0: the least energy.
 XC_DEMO_TIME_WEIGHT = 1.0
 #: Floor [m] of the cross-country demonstrations (ReferenceConfig.min_height): the least-energy
-#: plans glide to a thermal with a few dozen metres to spare (a quarter of them below 100 m), a
+#: plans glide to a thermal with little height to spare (some within metres of the ground), a
 #: margin a cloned policy's judgement does not have; above the floor it can still motor on.
 XC_DEMO_MIN_HEIGHT = 150.0
 #: Bumped when the tasks' reference settings change (records of another version are redone).
