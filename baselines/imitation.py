@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -83,6 +84,7 @@ def demonstrations(
     gamma: float,
     to_policy_action: Callable[[Any], Any] | None = None,
     names: Sequence[str] | None = None,
+    match: str | None = None,
     visit_weight: float = 1.0,
 ) -> Demonstrations:
     """Replay the ``sampler`` plans of every reference file in ``reference_dir`` through ``make_env``.
@@ -94,6 +96,9 @@ def demonstrations(
     :param gamma: the learner's discount (for the returns-to-go).
     :param to_policy_action: the inverse of the training action transform (None: identity).
     :param names: only these scenarios (default: all files, sorted by name).
+    :param match: only the scenarios whose name matches this regular expression as a whole
+        (``re.fullmatch``), e.g. a recipe's base plans and one DAgger round of a folder that holds
+        more (``xc-20(0|1)\\d\\d(-f1s\\d+)?``); None: every file.
     :param visit_weight: the weight of a DAgger plan's first imitated row, the state the policy
         visited (the plan's other rows are the search's own states, weight 1). A round that labels
         every k-th visited state samples the policy's states k times more sparsely than a plan's
@@ -107,6 +112,11 @@ def demonstrations(
     if not refs:
         raise ConfigError(f"demos={str(reference_dir)!r}: no reference files there (run scripts/reference.py)")
     chosen = sorted(refs) if names is None else list(names)
+    if match is not None:
+        pattern = demo_pattern(match)
+        chosen = [n for n in chosen if pattern.fullmatch(n)]
+        if not chosen:
+            raise ConfigError(f"demo_match={match!r}: no scenario in {str(reference_dir)!r} matches it")
     obs_rows: list[np.ndarray] = []
     act_rows: list[Any] = []
     ret_rows: list[np.ndarray] = []
@@ -175,6 +185,16 @@ def demonstrations(
         plan_costs=tuple(costs),
         weights=np.concatenate(w_rows),
     )
+
+
+def demo_pattern(match: str) -> re.Pattern[str]:
+    """``match`` compiled (:func:`demonstrations`); a ConfigError naming it if it is no regular expression."""
+    if not isinstance(match, str) or not match:
+        raise ConfigError(f"demo_match={match!r} must be a regular expression (a non-empty string)")
+    try:
+        return re.compile(match)
+    except re.error as exc:
+        raise ConfigError(f"demo_match={match!r} is not a regular expression: {exc}") from None
 
 
 def rows(demos: Demonstrations, index: np.ndarray) -> Demonstrations:

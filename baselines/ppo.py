@@ -133,6 +133,9 @@ class TrainConfig:
         are given; the fitted model is saved as ``bc_model.zip``. The env must fly the reference's
         dynamics (the task's default duration and envelope); reward settings may differ. The
         continuous policy's spread is then reset to ``log_std_init``. None (default): no cloning.
+    :param demo_match: with ``demos``: only the files whose scenario name matches this regular
+        expression as a whole (e.g. the base plans and one DAgger round of a folder that holds more
+        rounds: ``xc-20([01]\\d\\d|2[0-3]\\d)(-f1s\\d+)?``). None (default): every file.
     :param demo_mirror: continuous and grid: clone the mirror images of the plans too (east ->
         -east, every turn reversed; :func:`baselines.imitation.with_mirror_images`).
     :param demo_visit_weight: the weight of each DAgger plan's first row, the state the policy
@@ -178,6 +181,7 @@ class TrainConfig:
     env_kwargs: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     init_from: str | None = None
     demos: str | None = None
+    demo_match: str | None = None
     demo_mirror: bool = True
     demo_visit_weight: float = 1.0
     demo_epochs: int = 200
@@ -225,6 +229,12 @@ class TrainConfig:
             if not isinstance(self.demos, (str, Path)) or not Path(self.demos).is_dir():
                 raise ValueError(f"demos={self.demos!r} must be a folder of reference files (scripts/reference.py)")
             object.__setattr__(self, "demos", str(self.demos))
+        if self.demo_match is not None:
+            if self.demos is None:
+                raise ValueError("demo_match needs demos")
+            from baselines.imitation import demo_pattern
+
+            demo_pattern(self.demo_match)
         if isinstance(self.demo_rehearsal, bool) or not isinstance(self.demo_rehearsal, int) or self.demo_rehearsal < 0:
             raise ValueError(f"demo_rehearsal={self.demo_rehearsal!r} must be an integer >= 0")
         if self.demo_rehearsal and self.demos is None:
@@ -936,6 +946,7 @@ def _clone_demos(model: Any, config: TrainConfig, out: Path) -> tuple[dict[str, 
         sampler="continuous" if config.algo in CONTINUOUS_ALGOS else "primitive",
         gamma=config.gamma,
         to_policy_action=to_policy_action,
+        match=config.demo_match,
         visit_weight=float(config.demo_visit_weight),
     )
     mirrored = bool(config.demo_mirror and config.algo in CONTINUOUS_ALGOS)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -26,8 +27,9 @@ from baselines.ppo import (
 from baselines.reference import ReferenceConfig, compute_reference, load_reference, save_reference
 from baselines.reference.tasks import XC_DEMO_MIN_HEIGHT, XC_DEMO_TIME_WEIGHT
 from soaring_env._validation import ConfigError
+from soaring_env.env.config import MAX_EPISODE_STEPS
 from soaring_env.physics.thermals import Thermal, WindField
-from soaring_env.scenario import Bounds, GoalRegion, Scenario
+from soaring_env.scenario import Bounds, GoalRegion, Scenario, get_scenario
 
 #: Two small goal problems, a thermal on the way (a few primitives each).
 SCENARIOS = tuple(
@@ -101,6 +103,26 @@ def test_replayed_plans_reach_the_goal_and_sum_to_their_return(ref_dir: Path, sa
             np.concatenate([np.asarray(refs[s]["samplers"][sampler]["actions"], np.float32) for s in d1.scenarios]),
             atol=2e-7,
         )
+
+
+def test_demo_match_selects_the_files_by_scenario_name(ref_dir: Path, tmp_path: Path) -> None:
+    """``match`` keeps the plans whose scenario name matches as a whole (a recipe's rounds out of a
+    folder that holds more); a pattern that matches nothing, or is none, is refused by name."""
+    make = _env(CONTINUOUS_ID)
+    both = demonstrations(ref_dir, make, sampler="continuous", gamma=0.99)
+    one = demonstrations(ref_dir, make, sampler="continuous", gamma=0.99, match=r"tiny-1")
+    assert both.scenarios == ("tiny-0", "tiny-1") and one.scenarios == ("tiny-1",)
+    assert np.array_equal(one.observations, both.observations[both.episode == 1])
+    assert demonstrations(ref_dir, make, sampler="continuous", gamma=0.99, match=r"tiny-\d").scenarios == both.scenarios
+    for bad, msg in (("tiny", "matches it"), ("tiny-(", "not a regular expression"), ("", "regular expression")):
+        with pytest.raises(ConfigError, match=f"demo_match.*{msg}"):
+            demonstrations(ref_dir, make, sampler="continuous", gamma=0.99, match=bad)
+    with pytest.raises(ValueError, match="demo_match needs demos"):
+        TrainConfig(demo_match="tiny-1")
+    with pytest.raises(ValueError, match="demo_match"):
+        TrainConfig(demos=str(ref_dir), demo_match="tiny-(")
+    run = train(_tiny_run("grid", ref_dir, demo_epochs=1, demo_match="tiny-0"), tmp_path / "run")
+    assert json.loads((run / "config.json").read_text())["behaviour_cloning"]["scenarios"] == ["tiny-0"]
 
 
 def test_other_dynamics_than_the_reference_are_refused(ref_dir: Path) -> None:
@@ -391,6 +413,18 @@ def test_demos_cli_plans_resumes_and_runs_a_dagger_round(
     assert "states visited" in capsys.readouterr().out
     starts = sorted(p.stem for p in out.glob("random-20000-r1s*.json"))
     assert starts and all(int(s.rsplit("s", 1)[1]) % 3 == 0 for s in starts)
+    # goal reaching with a time weight: the env's own search, and DAgger keeps the policy's steps
+    timed = tmp_path / "timed"
+    args = ["--scenarios", "1", "--time-weight", "1", *common[:-1], str(timed)]
+    assert main(args) == 0
+    plan = load_reference(timed / "random-20000.json").samplers["continuous"]
+    assert plan.settings["time_weight"] == 1.0 and math.isnan(plan.direct_cost) and plan.demo_from == 0
+    assert main([*args, "--dagger", str(run), "--every", "3", "--tag", "r1"]) == 0
+    for path in sorted(timed.glob("random-20000-r1s*.json")):
+        k = int(path.stem.rsplit("s", 1)[1])
+        plan = load_reference(path).samplers["continuous"]
+        assert plan.demo_from == k and len(plan.actions) <= MAX_EPISODE_STEPS  # the steps left, not 40 more
+        assert load_reference(path).scenario.start == get_scenario("random-20000").start
     xc_out = tmp_path / "xc"
     assert main(["--task", "xc", "--scenarios", "1", *common[:-1], str(xc_out)]) == 0  # the task's own search
     xc_ref = load_reference(xc_out / "xc-20000.json")
@@ -403,10 +437,10 @@ def test_demos_cli_plans_resumes_and_runs_a_dagger_round(
         (["--tag", "a-b"], "--tag"),
         (["--dagger", str(tmp_path / "nowhere")], "--dagger"),
         (["--task", "xc", "--dagger", str(run)], "--dagger"),  # a mid-flight start would get a fresh battery
-        (["--time-weight", "1"], "--time-weight"),  # goal reaching: none
+        (["--time-weight", "-1"], "time_weight"),
         (["--task", "xc", "--time-weight", "-1"], "time_weight"),
         (["--task", "xc", "--time-weight", "nan"], "time_weight"),
-        (["--min-height", "100"], "--min-height"),  # goal reaching: none
+        (["--min-height", "-5"], "min_height"),
         (["--task", "xc", "--min-height", "-5"], "min_height"),
         (["--until", "0"], "--until"),
     ):
@@ -481,10 +515,13 @@ def test_cross_country_plans_clone_into_the_grid_policy(tmp_path: Path) -> None:
             task_reference(*bad)
     with pytest.raises(ConfigError):
         task_reference(xc, XC_TINY, 16, prefix=[[float("nan"), 0.0, 0.0]])
-    with pytest.raises(ConfigError, match="time_weight"):  # the goal-reaching search takes no time weight
-        reference_config(gym.make(CONTINUOUS_ID), 16, time_weight=1.0)
+    climb = gym.make("soaring/ThermalClimbContinuous-v0")
+    with pytest.raises(ConfigError, match="time_weight"):  # the thermal climb's search takes no time weight
+        reference_config(climb, 16, time_weight=1.0)
     with pytest.raises(ConfigError, match="min_height"):  # nor a floor
-        reference_config(gym.make(CONTINUOUS_ID), 16, min_height=100.0)
+        reference_config(climb, 16, min_height=100.0)
+    goal = reference_config(gym.make(CONTINUOUS_ID), 16, time_weight=1.0, min_height=100.0)
+    assert isinstance(goal, ReferenceConfig) and (goal.time_weight, goal.min_height, goal.max_edges) == (1.0, 100.0, 40)
     prompt = task_reference(xc, XC_TINY, beam_width=16, time_weight=XC_DEMO_TIME_WEIGHT).samplers["continuous"]
     assert prompt.settings["time_weight"] == XC_DEMO_TIME_WEIGHT
     assert math.isfinite(prompt.best_cost) and prompt.flight_time <= plan.flight_time

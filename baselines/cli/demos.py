@@ -11,6 +11,8 @@ the states a trained policy visits.
         --failed-only --tag f1 --out results/reference-train-xc
     # cross-country: the task's own reference (battery, its control set) on xc-20000 ...
     python scripts/demos.py --task xc --scenarios 200 --out results/reference-train-xc
+    # goal reaching with a time weight [J/kg per s]: the goal env's own search (DAgger keeps prefixes)
+    python scripts/demos.py --scenarios 200 --time-weight 1 --out results/reference-train-goal-t1
 
 Then ``python scripts/train_ppo.py --algo grid --set 'demos="results/reference-train"'`` clones the
 plans into a policy before PPO (:mod:`baselines.imitation`). One JSON per plan, written atomically
@@ -38,10 +40,14 @@ from baselines.reference.tasks import XC_DEMO_MIN_HEIGHT, XC_DEMO_TIME_WEIGHT, r
 from soaring_env._validation import ConfigError
 from soaring_env.scenario import atomic_write_text, get_scenario
 
-#: ``--task``: (the env id of the task's own reference search, None: the yardstick's; scenario family).
-DEMO_TASKS: dict[str, tuple[str | None, str]] = {
-    "goal": (None, "random"),
-    "xc": ("soaring/CrossCountryContinuous-v0", "xc"),
+#: ``--task``: (the env id of the task's own reference search, scenario family, the default time
+#: weight [J/kg per s] and floor [m]). Goal reaching with neither runs the yardstick's search
+#: (:func:`~baselines.reference.yardstick.compute_reference`: the direct cost too; DAgger starts are
+#: copies of the scenario at the visited state, with a fresh time limit); with either, the env's own
+#: (:func:`~baselines.reference.tasks.task_reference`: DAgger keeps the policy's steps as a prefix).
+DEMO_TASKS: dict[str, tuple[str, str, float, float]] = {
+    "goal": ("soaring/SoaringContinuous-v0", "random", 0.0, 0.0),
+    "xc": ("soaring/CrossCountryContinuous-v0", "xc", XC_DEMO_TIME_WEIGHT, XC_DEMO_MIN_HEIGHT),
 }
 
 
@@ -57,13 +63,14 @@ def main(argv: list[str] | None = None) -> int:
         "--time-weight",
         type=float,
         default=None,
-        help=f"--task xc: the search's time weight [J/kg per s] (default {XC_DEMO_TIME_WEIGHT:g}; 0: least energy)",
+        help=f"the search's time weight [J/kg per s] (--task xc: {XC_DEMO_TIME_WEIGHT:g}, goal: 0 by default; "
+        "0: least energy)",
     )
     p.add_argument(
         "--min-height",
         type=float,
         default=None,
-        help=f"--task xc: the search's floor [m] (default {XC_DEMO_MIN_HEIGHT:g}; 0: down to the ground)",
+        help=f"the search's floor [m] (--task xc: {XC_DEMO_MIN_HEIGHT:g}, goal: 0 by default; 0: down to the ground)",
     )
     p.add_argument("--dagger", default=None, metavar="RUN", help="plan from the states this PPO run visits")
     p.add_argument("--ppo-model", choices=PPO_MODELS, default="final", help="which model of RUN")
@@ -85,20 +92,17 @@ def main(argv: list[str] | None = None) -> int:
     if not args.tag.isalnum() and args.tag != "":
         p.error(f"--tag={args.tag!r}: letters and digits only")
     try:
-        env_id, family = DEMO_TASKS[args.task]
-        if env_id is None:
-            for flag, v in (("--time-weight", args.time_weight), ("--min-height", args.min_height)):
-                if v:
-                    p.error(f"{flag}={v!r}: goal-reaching demonstrations take none (--task xc only)")
+        task_id, family, tw, floor = DEMO_TASKS[args.task]
+        tw = tw if args.time_weight is None else args.time_weight
+        floor = floor if args.min_height is None else args.min_height
+        env_id: str | None = None
+        if args.task == "goal" and not tw and not floor:  # the yardstick's search, as published
             cfg = demo_reference_config(args.beam_width)
         else:
             import gymnasium as gym
 
-            ids = {"continuous": env_id, "primitive": env_id.replace("Continuous", "")}
-            env_id = ids[args.sampler]
+            env_id = {"continuous": task_id, "primitive": task_id.replace("Continuous", "")}[args.sampler]
             probe = gym.make(env_id)
-            tw = XC_DEMO_TIME_WEIGHT if args.time_weight is None else args.time_weight
-            floor = XC_DEMO_MIN_HEIGHT if args.min_height is None else args.min_height
             task_cfg = reference_config(probe, args.beam_width, tw, floor)
             probe.close()
             assert isinstance(task_cfg, ReferenceConfig)
@@ -138,15 +142,17 @@ def main(argv: list[str] | None = None) -> int:
 
 def _dagger_starts(args: argparse.Namespace, scenarios: list, task: bool) -> tuple[list, dict[str, list]]:
     """The DAgger starts of ``args.dagger``'s policy on ``scenarios``: (scenarios, prefixes by name).
-    Goal reaching: copies of the scenarios starting at the visited states (no prefixes); a task
-    (``task``: cross-country, whose battery and time carry over): copies with the policy's actions
-    up to each visited state as prefixes (:func:`baselines.imitation.visited_prefixes`)."""
+    The yardstick's search (``task`` false): copies of the scenarios starting at the visited states
+    (no prefixes); an env's own search (``task``: its time, steps and battery carry over): the
+    scenarios with the policy's actions up to each visited state as prefixes
+    (:func:`baselines.imitation.visited_prefixes`)."""
     from baselines.agents import PPOAgent
     from baselines.evaluation import make_env, ppo_env_kwargs, ppo_model_path
     from baselines.imitation import visited_prefixes
 
     agent = PPOAgent(ppo_model_path(args.dagger, args.ppo_model))
-    if task and agent.env_id != DEMO_TASKS[args.task][0]:
+    task_id = DEMO_TASKS[args.task][0]
+    if agent.env_id not in (task_id, task_id.replace("Continuous", "")):
         raise ValueError(f"a run of {agent.env_id}, not of the --task {args.task} env")
     kwargs = ppo_env_kwargs(agent.config)
 

@@ -65,23 +65,33 @@ def reference_config(
 ) -> HorizonConfig | ReferenceConfig:
     """The reference search settings of a task env, or of the goal-reaching env (the yardstick's
     :class:`ReferenceConfig` with ``beam_width``); ``time_weight`` [J/kg per s] and ``min_height``
-    [m]: the cross-country search's (:attr:`ReferenceConfig.time_weight`, ``.min_height``; the
-    other tasks refuse any but 0)."""
+    [m]: the goal searches' (:attr:`ReferenceConfig.time_weight`, ``.min_height``; cross-country and
+    goal reaching; the thermal climb, which has no goal, refuses any but 0)."""
     base: Any = env.unwrapped
     xc = base.has_goal and getattr(base, "has_battery", False)
     for name, v in (("time_weight", time_weight), ("min_height", min_height)):
-        if v != 0.0 and not xc:
-            raise ConfigError(f"{name}={v!r}; allowed: 0 (only the cross-country search has one)")
+        if v != 0.0 and not base.has_goal:
+            raise ConfigError(f"{name}={v!r}; allowed: 0 (the thermal climb's search has none)")
     if not base.has_goal:
         return HorizonConfig(beam_width=beam_width)
     if not xc:
-        return goal_config(beam_width)
-    steps = int(round(base.config.time_limit / base.library.duration))
+        cfg = goal_config(beam_width)
+        return dataclasses.replace(cfg, max_edges=_episode_steps(base), time_weight=time_weight, min_height=min_height)
+    steps = _episode_steps(base)
     # iterative widening from a fixed first width: the best plan can only improve as the knob doubles
     kw: dict[str, Any] = {"beam_width": beam_width, "start_width": min(XC_START_WIDTH, beam_width), "max_edges": steps}
     if base.continuous:
         kw.update(speeds=XC_SPEEDS, turns_deg=XC_TURNS_DEG, gammas_deg=(0.0,))
     return ReferenceConfig(**kw, progress_weight=XC_PROGRESS_WEIGHT, time_weight=time_weight, min_height=min_height)
+
+
+def _episode_steps(base: Any) -> int:
+    """The most steps an episode of the env ``base`` has: its ``max_steps`` or its time limit
+    over the step duration, whichever ends it first (neither: the search's default depth)."""
+    limits = [int(base.config.max_steps)] if base.config.max_steps is not None else []
+    if base.config.time_limit is not None:
+        limits.append(int(round(base.config.time_limit / base.library.duration)))
+    return min(limits) if limits else ReferenceConfig.max_edges
 
 
 def reference_plan(
@@ -114,8 +124,7 @@ def reference_plan(
         stats = {"rollouts": r.rollouts, "n_controls": r.n_controls, "found": math.isfinite(r.energy)}
     else:
         if base.steps:  # mid-episode: the state as a start, the steps and battery left
-            left = int(round(base.config.time_limit / base.library.duration)) - base.steps
-            cfg = dataclasses.replace(cfg, max_edges=max(left, 1))
+            cfg = dataclasses.replace(cfg, max_edges=max(_episode_steps(base) - base.steps, 1))
         sc = base.scenario
         model = dataclasses.replace(base.model, scenario=sc.replace(start=tuple(float(v) for v in base.state[:4])))
         v_prev = float(base.airspeed_prev)
