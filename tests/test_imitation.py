@@ -527,6 +527,35 @@ def test_cross_country_plans_clone_into_the_grid_policy(tmp_path: Path) -> None:
     assert math.isfinite(prompt.best_cost) and prompt.flight_time <= plan.flight_time
 
 
+@pytest.mark.parametrize("width", [1, 2, 8])
+def test_goal_task_search_is_never_worse_than_flying_the_direct_plan(width: int) -> None:
+    """The goal env's own search (the one a time weight or floor selects) is seeded with the best
+    plan of the field without thermals, as the yardstick's is: however narrow the beam, its plan
+    spends no more than that direct plan flown through the real field."""
+    import gymnasium as gym
+
+    from baselines.reference import search
+    from baselines.reference.bounds import without_thermals
+    from baselines.reference.tasks import reference_config, task_reference
+
+    for sc in SCENARIOS:
+        env = gym.make(CONTINUOUS_ID)
+        env.reset(seed=0, options={"scenario": sc})
+        cfg = reference_config(env, width)
+        assert isinstance(cfg, ReferenceConfig)
+        direct = search(without_thermals(env.unwrapped.model), "continuous", cfg)
+        assert direct.plan.solved
+        info: dict = {}
+        for a in direct.plan.actions:
+            *_, terminated, truncated, info = env.step(np.asarray(a, np.float32))
+            if terminated or truncated:
+                break
+        plan = task_reference(CONTINUOUS_ID, sc, beam_width=width).samplers["continuous"]
+        assert math.isfinite(plan.best_cost)
+        if info.get("is_success"):
+            assert plan.best_cost <= env.unwrapped.energy_spent + 1e-9
+
+
 def test_cross_country_dagger_plans_from_the_visited_state_with_its_battery(tmp_path: Path) -> None:
     """A DAgger start of a task is the policy's actions up to a visited state: the task's search
     flies them, plans from the state it reaches (time, battery, airspeed flown last), and the

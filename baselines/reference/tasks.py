@@ -24,9 +24,9 @@ import gymnasium as gym
 import numpy as np
 
 from baselines.reference.beam import ReferenceConfig, search
-from baselines.reference.bounds import lower_bound
+from baselines.reference.bounds import lower_bound, without_thermals
 from baselines.reference.horizon import HorizonConfig, energy_search
-from baselines.reference.yardstick import SamplerReference, ScenarioReference, sampler_config
+from baselines.reference.yardstick import SamplerReference, ScenarioReference, plan_controls, sampler_config
 from soaring_env._validation import ConfigError
 from soaring_env.scenario import Scenario
 
@@ -128,17 +128,20 @@ def reference_plan(
         sc = base.scenario
         model = dataclasses.replace(base.model, scenario=sc.replace(start=tuple(float(v) for v in base.state[:4])))
         v_prev = float(base.airspeed_prev)
+        t_now, v0 = float(base.time), (v_prev if math.isfinite(v_prev) else None)
+        seeds: list[np.ndarray] = []
+        n_direct = 0
+        if not getattr(base, "has_battery", False):  # goal reaching: seeded with the direct plan, as
+            # the yardstick's search is, so that it finds a plan wherever flying past the thermals does
+            direct = search(without_thermals(model), sampler, cfg, t0=t_now, airspeed_prev=v0)
+            seeds = [plan_controls(direct.plan)] if direct.plan.solved else []
+            n_direct = direct.rollouts
         s = search(
-            model,
-            sampler,
-            cfg,
-            battery=float(base.battery_left),
-            t0=float(base.time),
-            airspeed_prev=v_prev if math.isfinite(v_prev) else None,
+            model, sampler, cfg, seed_controls=seeds, battery=float(base.battery_left), t0=t_now, airspeed_prev=v0
         )
         actions = list(s.plan.actions)
         predicted = -s.cost
-        stats = {"rollouts": s.rollouts, "n_controls": s.n_controls, "found": bool(s.plan.solved)}
+        stats = {"rollouts": s.rollouts + n_direct, "n_controls": s.n_controls, "found": bool(s.plan.solved)}
     stats.update(seconds=time.perf_counter() - t0, predicted_energy=predicted, settings=dataclasses.asdict(cfg))
     return actions, stats
 

@@ -167,13 +167,13 @@ def compute_reference(
             return lambda d, n: progress(f"{sampler}/{stage}", d, n)
 
         direct = search(direct_model, sampler, cfg_s, progress=cb("direct"))
-        seed = [_core_controls(direct.plan)] if direct.plan.solved else []
+        seed = [plan_controls(direct.plan)] if direct.plan.solved else []
         n_sst = 0
         if cfg_s.planner_iterations:
             sst = plan_soaring(model, sampler, max_iterations=cfg_s.planner_iterations, seed=0)
             n_sst = sst.stats.iterations
             if sst.plan.solved:
-                seed.append(_core_controls(sst.plan))
+                seed.append(plan_controls(sst.plan))
         best = search(model, sampler, cfg_s, seed_controls=seed, progress=cb("thermals"))
         out[sampler] = SamplerReference(
             best_cost=best.cost,
@@ -195,7 +195,7 @@ def sampler_config(cfg: ReferenceConfig, sampler: str) -> ReferenceConfig:
     return cfg if sampler == "primitive" else dataclasses.replace(cfg, planner_iterations=0)
 
 
-def _core_controls(plan: Plan) -> np.ndarray:
+def plan_controls(plan: Plan) -> np.ndarray:
     """The plan's env actions as rows of the search's control vectors."""
     acts = plan.actions
     if plan.kind == "primitive":
