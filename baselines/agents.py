@@ -601,7 +601,7 @@ class SSTPlannerAgent:
     :param max_iterations: iteration budget per planning call (None: time only; with an iteration
         budget alone the plans, and so the evaluation, are deterministic).
     :param name: label in results.
-    :param planner: the named planner configuration (``SST_CONFIGS``: ``"soaring"`` or ``"paper"``).
+    :param planner: the named planner configuration (``SST_CONFIGS``: ``"soaring"``, ``"seeded"`` or ``"paper"``).
     """
 
     def __init__(

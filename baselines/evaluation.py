@@ -61,6 +61,8 @@ AGENT_NAMES = (
     "sst-continuous",
     "sst-soaring-primitives",
     "sst-soaring-continuous",
+    "sst-seeded-primitives",
+    "sst-seeded-continuous",
     "ppo-discrete",
     "ppo-masked",
     "ppo-continuous",
@@ -197,9 +199,10 @@ def agent_spec(name: str, config: EvalConfig) -> AgentSpec:
     """The :class:`AgentSpec` of agent ``name`` under ``config``; raises for unknown names."""
     check_agent_name(name)
     if name.startswith("sst-"):
-        # "sst-primitives" / "sst-continuous": the paper's planner; "sst-soaring-*": the soaring one
+        # "sst-primitives" / "sst-continuous": the paper's planner; "sst-soaring-*" / "sst-seeded-*":
+        # the soaring configuration without / with the seeding reference search
         sampler = "primitive" if name.endswith("primitives") else "continuous"
-        planner = "soaring" if name.startswith("sst-soaring-") else "paper"
+        planner = next((p for p in ("soaring", "seeded") if name.startswith(f"sst-{p}-")), "paper")
         env_id = DISCRETE_ID if sampler == "primitive" else CONTINUOUS_ID
         settings: dict[str, Any] = {
             "sampler": sampler,

@@ -122,7 +122,7 @@ _WARM: set[str] = set()
 
 def run_one(job: dict[str, Any]) -> dict[str, Any]:
     """Plan once and return the JSON-able record of the run (executed in a worker process)."""
-    from baselines.sst.plan import plan_soaring
+    from baselines.sst.planner import plan_soaring
     from soaring_env.model import SoaringModel
 
     scenario = Scenario.from_dict(job["scenario"])

@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 
 import soaring_env.env.core as env_core
 from baselines.sst.agent import SSTAgent
-from baselines.sst.plan import plan_soaring
+from baselines.sst.planner import plan_soaring
 from soaring_env import Aircraft, ConfigError, PrimitiveLibrary, SoaringEnvConfig, Thermal, WindField, rollout
 from soaring_env.model import SoaringModel
 from soaring_env.primitives import MAX_HEIGHT

@@ -37,6 +37,23 @@ def _make_env(kind: str):
         pytest.skip(f"env not available yet: {exc!r}")
 
 
+def assert_replays(plan: Plan, scenario) -> None:  # type: ignore[no-untyped-def]
+    """Fly ``plan`` through ``env.step`` from the scenario's start: every state and edge cost as
+    planned, bit for bit, and the goal reached at the planned cost."""
+    env = _make_env(plan.kind)
+    env.reset(seed=0, options={"scenario": scenario})
+    assert np.array_equal(np.asarray(env.unwrapped.state, np.float64), plan.states[0])
+    term = False
+    info: dict = {}
+    for act, s_next, c in zip(plan.actions, plan.states[1:], plan.edge_costs, strict=True):
+        assert not term
+        _, _, term, _, info = env.step(act)
+        assert info["edge_cost"] == c
+        assert np.array_equal(np.asarray(env.unwrapped.state, np.float64), s_next)
+    assert term and info["is_success"] and info["energy_spent"] == pytest.approx(plan.cost, rel=1e-12)
+    env.close()
+
+
 @pytest.fixture(scope="module")
 def model() -> SoaringModel:
     return SoaringModel(scenario=paper_scenario())

@@ -257,16 +257,10 @@ def test_bad_soaring_settings_name_the_field(kwargs: dict, match: str) -> None:
 
 
 def test_soaring_plans_replay_and_are_deterministic(model: SoaringModel) -> None:
-    from test_sst_soaring import _make_env
+    from test_sst_soaring import assert_replays
 
     for kind in SAMPLERS:
         a = plan_soaring(model, kind, max_iterations=5000, seed=1)
         b = plan_soaring(model, kind, max_iterations=5000, seed=1)
         assert a.plan.solved and a.plan.to_dict() == b.plan.to_dict()
-        env = _make_env(kind)
-        env.reset(seed=0, options={"scenario": model.scenario})
-        for act, s_next, c in zip(a.plan.actions, a.plan.states[1:], a.plan.edge_costs, strict=True):
-            _, _, term, _, info = env.step(act)
-            assert info["edge_cost"] == c
-            assert np.array_equal(np.asarray(env.unwrapped.state, np.float64), s_next)
-        assert term and info["energy_spent"] == pytest.approx(a.plan.cost, rel=1e-12)
+        assert_replays(a.plan, model.scenario)

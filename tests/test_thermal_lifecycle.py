@@ -17,7 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from baselines.reference.beam import ReferenceConfig, control_set, thermal_values
-from baselines.sst.plan import plan_soaring
+from baselines.sst.planner import plan_soaring
 from baselines.sst.soaring import S_H, S_T, SoaringProblem
 from soaring_env import Aircraft, ConfigError, Thermal, WindField, rollout
 from soaring_env.env import ENV_ID

@@ -4,15 +4,16 @@ Rows: the paper's planner (``SST_CONFIGS["paper"]``: uniform samplers, no bound)
 planner with the glide mixture (the first step of the cumulative path paper -> + glide mixture ->
 + cost bound = "soaring without goal completions" -> + completions = "soaring without local
 refinement" -> + refinements = soaring), the soaring
-configuration (``SST_CONFIGS["soaring"]``, the default) and the soaring configuration with each of
+configuration (``SST_CONFIGS["soaring"]``, the default), the soaring configuration with each of
 its measures switched back to the paper's setting (leave one out: a measure earns its place when
-its row is worse than the soaring row). Every run plans from the scenario's start for ``--time``
-seconds of wall clock on one core (one worker process per core with ``--workers``); the anytime
-record gives the cost after 1, 5 and ``--time`` seconds. Regret is measured against the reference
-table (``scripts/reference.py``) of the same scenario.
+its row is worse than the soaring row), and the soaring configuration plus the seeding reference
+search (``SST_CONFIGS["seeded"]``, row "soaring + reference seed"). Every run plans from the
+scenario's start for ``--time`` seconds of wall clock on one core (one worker process per core
+with ``--workers``); the anytime record gives the cost after 1, 5 and ``--time`` seconds. Regret
+is measured against the reference table (``scripts/reference.py``) of the same scenario.
 
     python scripts/ablation_sst.py --workers 2           # paper scenario: 10 seeds per row, 30 for the
-                                                         # soaring row, 20 s per run, both samplers
+                                                         # soaring and seeded rows, 20 s per run, both samplers
     python scripts/ablation_sst.py --heldout --workers 2 # the 20 held-out scenarios (soaring row)
     python scripts/ablation_sst.py --time 2 --seeds 2 --out /tmp/abl   # a quick look
 
@@ -38,7 +39,7 @@ from baselines._runs import DirLock, check_cli_args, progress_bar, read_json
 from baselines.backends import run_jobs
 from baselines.evaluation import heldout_names, resolve_scenario
 from baselines.reference import load_reference, reference_path, regret
-from baselines.sst.plan import make_planner
+from baselines.sst.planner import make_planner
 from baselines.sst.soaring import SAMPLERS, SST_CONFIGS, SoaringSSTConfig
 from soaring_env.model import SoaringModel
 from soaring_env.scenario import atomic_write_text
@@ -50,6 +51,8 @@ MEASURES: dict[str, dict[str, Any]] = {
     "goal completions": {"completions": 0, "refinements": 0},
     "local refinement": {"refinements": 0},
 }
+#: The row of ``SST_CONFIGS["seeded"]``: the soaring configuration plus the seeding reference search.
+SEEDED_ROW = "soaring + reference seed"
 CHECKPOINTS = (1.0, 5.0)
 #: Regret at which a plan counts as near-best for the time-to-target column.
 NEAR_BEST = 0.1
@@ -66,6 +69,7 @@ def rows() -> dict[str, SoaringSSTConfig]:
     out["soaring"] = soar
     for name, off in MEASURES.items():
         out[f"soaring without {name}"] = dataclasses.replace(soar, **off)
+    out[SEEDED_ROW] = SST_CONFIGS["seeded"]  # the last step: + the seeding reference search
     return out
 
 
@@ -222,7 +226,11 @@ def plot_anytime(runs: list[dict[str, Any]], refs: dict[str, Any], time_limit: f
             arr = np.asarray(curves, np.float64)
             arr = arr[~np.any(np.isnan(arr), axis=1)]  # runs whose regret is undefined (NaN once solved)
             med = np.median(arr, axis=0) if len(arr) else np.full(len(grid), np.nan)
-            style = {"paper": {"color": "tab:blue", "lw": 2.0}, "soaring": {"color": "black", "lw": 3.0, "zorder": 5}}
+            style = {
+                "paper": {"color": "tab:blue", "lw": 2.0},
+                "soaring": {"color": "black", "lw": 3.0, "zorder": 5},
+                SEEDED_ROW: {"color": "tab:red", "lw": 2.5, "zorder": 6},
+            }
             kw = style.get(label, {"ls": "--", "lw": 1.5})
             ax.plot(grid, np.where(np.isfinite(med), med, np.nan), label=f"{label} ({len(rs)} runs)", **kw)
         ax.axhline(1.0, color="0.5", lw=0.8, ls="--")
@@ -245,7 +253,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--time", type=float, default=20.0, help="planning time per run [s] (default 20)")
     ap.add_argument("--seeds", type=int, default=10, help="seeds per ablation row (default 10)")
-    ap.add_argument("--soaring-seeds", type=int, default=30, help="seeds of the soaring row (default 30)")
+    ap.add_argument("--soaring-seeds", type=int, default=30, help="seeds of the soaring and seeded rows (default 30)")
     ap.add_argument("--samplers", nargs="+", default=list(SAMPLERS), choices=SAMPLERS)
     ap.add_argument("--heldout", action="store_true", help="the held-out scenarios (one seed each), paper vs soaring")
     ap.add_argument("--n-heldout", type=int, default=20, help="held-out scenarios with --heldout (default 20)")
@@ -269,7 +277,7 @@ def main(argv: list[str] | None = None) -> int:
         plan = [
             (row, "paper", seed)
             for row in cfgs
-            for seed in range(args.soaring_seeds if row == "soaring" else args.seeds)
+            for seed in range(args.soaring_seeds if row in ("soaring", SEEDED_ROW) else args.seeds)
         ]
     try:
         refs = {name: load_reference(reference_path(args.reference_dir, name)) for name in scen}

@@ -1,7 +1,8 @@
 """Benchmark the SST planner on the paper scenario, one core, serially.
 
-For both samplers (primitive, continuous) and six variants -- the soaring configuration (the
-default planner, ``SST_CONFIGS["soaring"]``), the paper's planner (``SST_CONFIGS["paper"]``,
+For both samplers (primitive, continuous) and seven variants -- the soaring configuration with the
+seeding reference search (``SST_CONFIGS["seeded"]``), the soaring configuration (the default
+planner, ``SST_CONFIGS["soaring"]``), the paper's planner (``SST_CONFIGS["paper"]``,
 batched: K expansions per round, K at the end of --help), the paper's planner one expansion at a
 time (K = 1: the published algorithm, grid nearest neighbours) and the plain reference implementation (brute-force
 nearest neighbours, one rollout per iteration), OMPL's SST and RRT -- it prints, as medians over the seeds: iterations
@@ -11,7 +12,7 @@ plots the anytime regret curves (median over the seeds) to ``--figure``.
 
     python scripts/bench_sst.py                    # 3 seeds x 20 s per row (about 15 minutes)
     python scripts/bench_sst.py --time 5 --seeds 2 # a quick look
-    python scripts/bench_sst.py --update --variants soaring   # rerun one variant, keep the other rows
+    python scripts/bench_sst.py --update --variants seeded    # rerun one variant, keep the other rows
     python scripts/bench_sst.py --rescore          # new reference: regrets, table and figure, no runs
 
 Targets: >= 40,000 iterations/s with the primitive sampler on one core (the paper's planner,
@@ -37,13 +38,14 @@ from typing import Any
 import numpy as np
 
 from baselines.reference import load_reference
-from baselines.sst.plan import make_planner
+from baselines.sst.planner import make_planner
 from baselines.sst.soaring import SAMPLERS, SST_CONFIGS, SoaringSSTConfig
 from soaring_env.model import SoaringModel
 from soaring_env.scenario import atomic_write_text, get_scenario
 
 #: variant -> (configuration, implementation)
 VARIANTS: dict[str, tuple[str, str]] = {
+    "seeded": ("seeded", "batched"),
     "soaring": ("soaring", "batched"),
     "paper": ("paper", "batched"),
     "paper one-at-a-time": ("paper", "one-at-a-time"),
@@ -314,7 +316,7 @@ def main(argv: list[str] | None = None) -> int:
         verdict = "PASS" if rate >= 40_000 else "FAIL"
         print(f"\ntarget >= 40,000 it/s (primitive, paper planner, batched, one core): {verdict} ({rate:,.0f})")
     for sampler in args.samplers:
-        for variant in ("soaring", "paper"):
+        for variant in ("seeded", "soaring", "paper"):
             rs = [r for r in rows if r["sampler"] == sampler and r["variant"] == variant]
             if rs:
                 ok = all(r["solved"] for r in rs)

@@ -294,8 +294,11 @@ def search(
     seed_controls: Sequence[np.ndarray] = (),
     progress: Callable[[int, int], None] | None = None,
     battery: float = math.inf,
+    start: np.ndarray | None = None,
     t0: float = 0.0,
     airspeed_prev: float | None = None,
+    time_limit: float | None = None,
+    max_rollouts: int | None = None,
 ) -> SearchResult:
     """Run the reference search from the scenario's start (see the module docstring).
 
@@ -308,15 +311,23 @@ def search(
     :param config: search settings.
     :param seed_controls: control sequences (rows as in :func:`control_set`) whose nodes are kept in
         the beam at every depth, e.g. the best plan in the field without thermals: the search then
-        never does worse than flying any of them.
+        never does worse than flying any of them. Their controls that are not in the control set
+        (e.g. a continuous SST plan's) join it for this search.
     :param progress: called as ``progress(done, total)`` in units of depth x stage.
     :param battery: motor energy budget [J/kg] (the cross-country task's): a path whose summed
         fuel + kinetic charge C' reaches it before the goal ends there (as ``"battery_empty"`` in the
         env), so only children with C' below it are kept; the goal edge itself may cross it, as in
         the env.
+    :param start: start state ``[Pn, Pe, chi, h]`` [m, m, rad, m] (None: the scenario's start).
     :param t0: time at the start [s] (a search from a state mid-episode).
     :param airspeed_prev: airspeed of the edge flown before the start [m/s] (None: the first edge
         pays no speed change, as after ``env.reset``).
+    :param time_limit: wall-clock budget [s] (None: none): no wider beam is started that would
+        need more than the time left (a doubled width takes about twice as long), and a beam stops
+        expanding at the first depth past it (its best plan so far is kept).
+    :param max_rollouts: budget in edges flown (None: none), applied the same way but exactly: no
+        depth is expanded that would take the search past it, so a rollout budget gives the same
+        plan on every machine.
     :returns: the best plan found (unsolved if none).
     """
     if not isinstance(model, SoaringModel):
@@ -326,9 +337,15 @@ def search(
         raise ConfigError(f"config={cfg!r} must be a ReferenceConfig")
     check_choice("sampler", sampler, SAMPLERS)
     t_start = time.perf_counter()
-    problem = SoaringProblem(model, sampler, t0=t0, airspeed_prev=airspeed_prev)
+    t_lim = None if time_limit is None else check_positive("time_limit", time_limit)
+    n_lim = None if max_rollouts is None else check_int("max_rollouts", max_rollouts, 1)
+    problem = SoaringProblem(model, sampler, start=start, t0=t0, airspeed_prev=airspeed_prev)
     ctrls = control_set(model, sampler, cfg)
-    seeds = [np.asarray(sq, dtype=np.float64).reshape(-1, ctrls.shape[1]) for sq in seed_controls]
+    seeds = [_seed_rows(model, sampler, sq, ctrls.shape[1], i) for i, sq in enumerate(seed_controls)]
+    if seeds:  # the seeds' controls outside the set join it (after it: the set's order is kept)
+        extra = np.unique(np.concatenate(seeds), axis=0)
+        extra = extra[~np.any(np.all(extra[:, None, :] == ctrls[None, :, :], axis=2), axis=1)]
+        ctrls = np.concatenate([ctrls, extra]) if len(extra) else ctrls
     widths = []
     w = min(cfg.start_width, cfg.beam_width)
     while w < cfg.beam_width:
@@ -340,13 +357,27 @@ def search(
     ctx = _Context.make(model, problem, sampler, ctrls, cfg, float(battery))
     best: tuple[float, float, np.ndarray, np.ndarray] | None = None
     rollouts = depth = 0
+    last_s = last_n = 0.0  # time and rollouts of the last beam
+
+    def stop(n_next: int) -> bool:
+        """Whether the budget forbids flying ``n_next`` more edges now."""
+        over_t = t_lim is not None and time.perf_counter() - t_start >= t_lim
+        return over_t or (n_lim is not None and rollouts + n_next > n_lim)
+
     for k, width in enumerate(widths):
+        if k > 0 and (
+            (t_lim is not None and time.perf_counter() - t_start + 2.0 * last_s > t_lim)
+            or (n_lim is not None and rollouts + 2.0 * last_n > n_lim)
+        ):
+            break  # a doubled beam would not fit into the budget
 
         def cb(d: int, n: int, k: int = k) -> None:
             if progress is not None:
                 progress(k * n + d, n * len(widths))
 
-        found, n_roll, depth = _beam(ctx, width, [*seeds, *([best[3]] if best else [])], cb)
+        t_beam = time.perf_counter()
+        found, n_roll, depth = _beam(ctx, width, [*seeds, *([best[3]] if best else [])], cb, stop)
+        last_s, last_n = time.perf_counter() - t_beam, float(n_roll)
         rollouts += n_roll
         if found is not None and (best is None or found[0] < best[0]):
             best = found
@@ -369,6 +400,27 @@ def search(
         depth=depth,
         n_controls=len(ctrls),
     )
+
+
+def _seed_rows(model: SoaringModel, sampler: str, seq: np.ndarray, width: int, i: int) -> np.ndarray:
+    """Seed sequence ``i`` as (n, width) control rows; raises unless every row is an action of the
+    action set: an allowed primitive index, or a normalized action in [-1, 1]^3."""
+    try:
+        rows = np.asarray(seq, dtype=np.float64).reshape(-1, width)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"seed_controls[{i}] must be a sequence of {width}-number control rows ({exc})") from None
+    if sampler == "primitive":
+        idx = rows[:, 0]
+        ok = np.isfinite(idx) & (idx == np.round(idx)) & (idx >= 0) & (idx < model.n_primitives)
+        ok[ok] = model.allowed_primitives()[idx[ok].astype(np.int64)]
+        allowed = "indices of primitives within the bank and stall limits"
+    else:
+        ok = np.all(np.isfinite(rows) & (np.abs(rows) <= 1.0), axis=1)
+        allowed = "normalized actions in [-1, 1]^3"
+    if not np.all(ok):
+        bad = rows[int(np.flatnonzero(~ok)[0])].tolist()
+        raise ConfigError(f"seed_controls[{i}] holds the control {bad!r}; allowed: {allowed}")
+    return rows
 
 
 @dataclass(frozen=True)
@@ -420,11 +472,16 @@ class _Context:
 
 
 def _beam(
-    ctx: _Context, width: int, seeds: list[np.ndarray], progress: Callable[[int, int], None]
+    ctx: _Context,
+    width: int,
+    seeds: list[np.ndarray],
+    progress: Callable[[int, int], None],
+    stop: Callable[[int], bool] | None = None,
 ) -> tuple[tuple[float, float, np.ndarray, np.ndarray] | None, int, int]:
     """One beam search of ``width``: ((objective, cost, path states (n + 1, 6), controls (n, c)) of
     the best plan or None, rollouts, deepest depth); the objective is the cost plus
-    ``time_weight`` x its flight time."""
+    ``time_weight`` x its flight time. ``stop(n)`` (the search's budget) is asked before each
+    depth whether its n rollouts may still be flown; if not, the beam ends with its best plan so far."""
     problem, ctrls, cfg = ctx.problem, ctx.ctrls, ctx.cfg
     m = len(ctrls)
     gn, ge, gr = ctx.goal
@@ -448,6 +505,8 @@ def _beam(
         x = states[-1]
         jc = costs[-1]
         n = len(x)
+        if stop is not None and stop(rollouts + n * m):
+            break
         # children: node-major, control-minor
         par = np.repeat(np.arange(n, dtype=np.int64), m)
         ctl = np.tile(np.arange(m, dtype=np.int64), n)

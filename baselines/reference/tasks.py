@@ -26,7 +26,7 @@ import numpy as np
 from baselines.reference.beam import ReferenceConfig, search
 from baselines.reference.bounds import lower_bound, without_thermals
 from baselines.reference.horizon import HorizonConfig, energy_search
-from baselines.reference.yardstick import SamplerReference, ScenarioReference, plan_controls, sampler_config
+from baselines.reference.yardstick import SamplerReference, ScenarioReference, sampler_config
 from soaring_env._validation import ConfigError
 from soaring_env.scenario import Scenario
 
@@ -134,7 +134,7 @@ def reference_plan(
         if not getattr(base, "has_battery", False):  # goal reaching: seeded with the direct plan, as
             # the yardstick's search is, so that it finds a plan wherever flying past the thermals does
             direct = search(without_thermals(model), sampler, cfg, t0=t_now, airspeed_prev=v0)
-            seeds = [plan_controls(direct.plan)] if direct.plan.solved else []
+            seeds = [direct.plan.controls()] if direct.plan.solved else []
             n_direct = direct.rollouts
         s = search(
             model, sampler, cfg, seed_controls=seeds, battery=float(base.battery_left), t0=t_now, airspeed_prev=v0

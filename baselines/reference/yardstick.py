@@ -22,11 +22,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from baselines.reference.beam import ReferenceConfig, search
 from baselines.reference.bounds import MIN_GAP, lower_bound, regret, without_thermals
-from baselines.sst.plan import Plan, plan_soaring
+from baselines.sst.planner import plan_soaring
 from baselines.sst.soaring import SAMPLERS
 from soaring_env._validation import ConfigError, check_choice
 from soaring_env.model import SoaringModel
@@ -167,13 +165,13 @@ def compute_reference(
             return lambda d, n: progress(f"{sampler}/{stage}", d, n)
 
         direct = search(direct_model, sampler, cfg_s, progress=cb("direct"))
-        seed = [plan_controls(direct.plan)] if direct.plan.solved else []
+        seed = [direct.plan.controls()] if direct.plan.solved else []
         n_sst = 0
         if cfg_s.planner_iterations:
             sst = plan_soaring(model, sampler, max_iterations=cfg_s.planner_iterations, seed=0)
             n_sst = sst.stats.iterations
             if sst.plan.solved:
-                seed.append(plan_controls(sst.plan))
+                seed.append(sst.plan.controls())
         best = search(model, sampler, cfg_s, seed_controls=seed, progress=cb("thermals"))
         out[sampler] = SamplerReference(
             best_cost=best.cost,
@@ -193,14 +191,6 @@ def sampler_config(cfg: ReferenceConfig, sampler: str) -> ReferenceConfig:
     seed only for the primitives -- the continuous planner's controls lie outside the continuous
     control set, so there it could not seed the beam."""
     return cfg if sampler == "primitive" else dataclasses.replace(cfg, planner_iterations=0)
-
-
-def plan_controls(plan: Plan) -> np.ndarray:
-    """The plan's env actions as rows of the search's control vectors."""
-    acts = plan.actions
-    if plan.kind == "primitive":
-        return np.array([[float(a)] for a in acts])
-    return np.array([np.asarray(a, np.float64) for a in acts])
 
 
 def save_reference(ref: ScenarioReference, path: str | Path) -> None:

@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 
 from baselines.sst.core import SSTError, SSTStats, check_budget
-from baselines.sst.plan import Plan, as_sst_config, plan_soaring
+from baselines.sst.plan import Plan
+from baselines.sst.planner import as_sst_config, plan_soaring
 from baselines.sst.soaring import SoaringSSTConfig
 from soaring_env._validation import check_int
 

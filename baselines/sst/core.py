@@ -266,6 +266,8 @@ class SSTStats:
 
     ``cost_history`` is the anytime record: one ``(time [s], iteration, best cost)`` per improvement
     of the best solution; with batching, times are those of the end of the round that found it.
+    ``seed_edges`` counts the edges flown by searches outside SST whose solutions were offered to
+    the tree (:meth:`SST.insert_path`; included in ``iterations``, their time in ``elapsed``).
     ``best_duration`` is the summed edge duration of the best solution (for the soaring problem:
     its flight time [s]); ``total`` counts the nodes in the tree (active + inactive + solution).
     """
@@ -286,6 +288,7 @@ class SSTStats:
     too_deep: int = 0
     bounded: int = 0
     completion_edges: int = 0
+    seed_edges: int = 0
     best_cost: float = math.inf
     best_duration: float = math.nan
     time_to_first_solution: float | None = None
@@ -549,6 +552,55 @@ class SST:
             if t_lim is not None and now - t_start >= t_lim:
                 break
         return self.result()
+
+    def insert_path(self, controls: np.ndarray, *, seconds: float = 0.0, edges: int = 0) -> bool:
+        """Insert a solution found elsewhere (e.g. by another search): the path that flies
+        ``controls`` (n, control_dim) from the root.
+
+        It is re-flown with the problem's ``propagate`` and inserted like a goal completion (the
+        ``chain`` mode of ``insert_batch``: edges its witnesses dominate become inactive ancestors)
+        if it reaches the goal within the depth limit, every edge valid, at a cost below the best
+        solution's; otherwise the tree is left as it is. Only nodes are added, so SST's guarantees
+        are kept. ``seconds`` and ``edges`` -- what finding the path took -- are added to the
+        statistics (``elapsed``, ``iterations``, ``seed_edges``) so that the anytime record counts
+        them, and an improvement is recorded at the new elapsed time.
+
+        :returns: whether the path became the best solution.
+        """
+        u = np.asarray(controls, np.float64).reshape(-1, self._cdim)
+        self.stats.elapsed += _positive("seconds", seconds) if seconds else 0.0
+        self.stats.iterations += _int("edges", edges, 0)
+        self.stats.seed_edges += edges
+        n = len(u)
+        if n == 0 or n > self.params.depth_limit:
+            return False
+        a = self._a
+        root = 0  # the root's slot never changes: it always has descendants or is active
+        x = a["X"][root][None, :].copy()
+        rows: list[Edges] = []
+        cost = 0.0
+        for k in range(n):
+            e = self.problem.propagate(x, u[k : k + 1])
+            want = K.EDGE_GOAL if k == n - 1 else K.EDGE_VALID
+            if int(e.outcome[0]) != want:
+                return False
+            rows.append(e)
+            cost = cost + float(e.cost[0])  # summed as the kernel sums costs to come
+            x = np.asarray(e.states, np.float64)
+        if not cost < self._best_cost[0] or a["status"][root] not in (K.ACTIVE, K.INACTIVE):
+            return False
+        self._grow(n)
+        e = Edges(
+            states=np.concatenate([r.states for r in rows]),
+            cost=np.concatenate([r.cost for r in rows]),
+            duration=np.concatenate([r.duration for r in rows]),
+            outcome=np.concatenate([r.outcome for r in rows]),
+        )
+        n_imp = self._insert(np.zeros(n, np.int64), e, u, np.zeros(n, np.int64), chain=True)
+        if n_imp:
+            self._record_improvement()
+        self._sync_stats()
+        return bool(n_imp)
 
     def _targets(self, n: int) -> np.ndarray:
         """n selection targets: the problem's own ``sample_targets`` if it has one, else uniform."""

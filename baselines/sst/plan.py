@@ -1,5 +1,6 @@
-"""Plans: what the SST planner hands to an agent -- a list of env actions with the states and the
-cost it predicts -- and :func:`plan_soaring`, the one-call planner for a :class:`SoaringModel`.
+"""Plans: what the SST planner (and the reference search) hands to an agent -- a list of env
+actions with the states and the cost it predicts (:func:`baselines.sst.planner.plan_soaring` is the
+one-call planner that makes them).
 
 Executing ``plan.actions`` through ``env.step`` from the state the plan starts at (after
 ``env.reset(options={"scenario": model.scenario})`` for the default start) reproduces
@@ -10,17 +11,14 @@ the env makes.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from baselines.sst.core import SST, SSTParams, SSTResult, SSTStats
-from baselines.sst.reference import ReferenceSST
-from baselines.sst.soaring import S_T, S_V, SoaringProblem, SoaringSSTConfig
-from soaring_env._validation import ConfigError, check_bool, check_seed
-from soaring_env.model import GOAL, SoaringModel
+from baselines.sst.core import SSTResult, SSTStats
+from baselines.sst.soaring import S_T, S_V, SoaringProblem
+from soaring_env.model import GOAL
 
 
 @dataclass(frozen=True)
@@ -59,6 +57,12 @@ class Plan:
         """Flight time from the start to the end of the plan [s] (the goal edge counts up to its
         first point inside the goal region)."""
         return float(self.times[-1] - self.times[0]) if len(self.times) else math.nan
+
+    def controls(self) -> np.ndarray:
+        """The actions as rows of the SST core's (and the reference search's) control vectors:
+        (n, 1) primitive indices or (n, 3) normalized actions, as float64."""
+        width = 1 if self.kind == "primitive" else 3
+        return np.array([np.asarray(a, np.float64).reshape(width) for a in self.actions]).reshape(-1, width)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able form (floats round-trip exactly through ``json``)."""
@@ -142,103 +146,3 @@ class PlanningResult:
 
     plan: Plan
     stats: SSTStats
-
-
-def make_planner(
-    model: SoaringModel,
-    sampler: str = "primitive",
-    *,
-    config: SoaringSSTConfig | Mapping[str, Any] | None = None,
-    seed: int | None = 0,
-    start: np.ndarray | None = None,
-    t0: float = 0.0,
-    airspeed_prev: float | None = None,
-    reference: bool = False,
-) -> tuple[SoaringProblem, SST | ReferenceSST]:
-    """Build the soaring problem and an SST planner over it (``reference=True``: the plain
-    :class:`ReferenceSST`). Arguments as in :func:`plan_soaring`."""
-    cfg = as_sst_config(config)
-    check_seed("seed", seed)
-    check_bool("reference", reference)
-    problem = SoaringProblem(model, sampler, cfg, start=start, t0=t0, airspeed_prev=airspeed_prev)
-    params = SSTParams(
-        selection_radius=cfg.selection_radius,
-        pruning_radius=cfg.pruning_radius,
-        batch_size=cfg.batch_size,
-        max_depth=cfg.max_edges,
-        completions=cfg.completions,
-        completion_depth=cfg.completion_depth,
-        refinements=cfg.refinements,
-    )
-    planner: SST | ReferenceSST = (ReferenceSST if reference else SST)(problem, params, seed=seed)
-    return problem, planner
-
-
-def as_sst_config(config: SoaringSSTConfig | Mapping[str, Any] | None) -> SoaringSSTConfig:
-    """A :class:`SoaringSSTConfig` from itself, a dict of its fields, or None (the defaults); unknown
-    keys and other types raise a :class:`ConfigError` with the allowed fields."""
-    if config is None:
-        return SoaringSSTConfig()
-    if isinstance(config, SoaringSSTConfig):
-        return config
-    names = [f.name for f in fields(SoaringSSTConfig)]
-    if isinstance(config, Mapping):
-        unknown = sorted(str(k) for k in config if k not in names)
-        if unknown:
-            raise ConfigError(f"config has unknown key(s) {unknown!r}; allowed: {', '.join(names)}")
-        return SoaringSSTConfig(**config)
-    raise ConfigError(
-        f"config={config!r} has type {type(config).__name__}; a SoaringSSTConfig, a dict of its fields "
-        f"({', '.join(names)}) or None is required"
-    )
-
-
-def plan_soaring(
-    model: SoaringModel,
-    sampler: str = "primitive",
-    *,
-    time_limit: float | None = None,
-    max_iterations: int | None = None,
-    seed: int | None = 0,
-    config: SoaringSSTConfig | Mapping[str, Any] | None = None,
-    start: np.ndarray | None = None,
-    t0: float = 0.0,
-    airspeed_prev: float | None = None,
-    partial: bool = False,
-    reference: bool = False,
-) -> PlanningResult:
-    """Plan from the scenario's start (or ``start``) to its goal region with SST.
-
-    :param model: the flight model (scenario, aircraft, primitives) -- SST knows the thermal field.
-    :param sampler: ``"primitive"`` (174 primitives) or ``"continuous"`` (the continuous envelope).
-    :param time_limit: wall-clock budget [s].
-    :param max_iterations: iteration budget (at least one budget is required).
-    :param seed: planner seed (same seed, same budget in iterations -> same plan).
-    :param config: radii, distance weights, batch size (a :class:`SoaringSSTConfig` or a dict of its fields).
-    :param start: start state ``[Pn, Pe, chi, h]``; default the scenario's start.
-    :param t0: start time [s].
-    :param airspeed_prev: airspeed before the start [m/s] (None: the first edge pays no kinetic term).
-    :param partial: if no solution is found, return the path to the tree node nearest the goal
-        centre (for receding-horizon use) instead of an empty plan.
-    :param reference: use the plain unbatched :class:`ReferenceSST` (slow; for comparisons).
-    :returns: the plan (``plan.solved`` tells whether it reaches the goal) and the statistics;
-        no solution within the budget is a normal result.
-    """
-    problem, planner = make_planner(
-        model,
-        sampler,
-        config=config,
-        seed=seed,
-        start=start,
-        t0=t0,
-        airspeed_prev=airspeed_prev,
-        reference=reference,
-    )
-    check_bool("partial", partial)
-    res = planner.run(time_limit=time_limit, max_iterations=max_iterations)
-    if not res.solved and partial:
-        tree = planner.tree()
-        g = model.scenario.require_goal()
-        d = g.distance(tree.states[:, 0], tree.states[:, 1], tree.states[:, 3])
-        res = planner.result_for(int(tree.ids[int(np.argmin(d))]))
-    return PlanningResult(plan=plan_from_result(problem, res), stats=res.stats)

@@ -1,0 +1,239 @@
+"""The one-call soaring planner: :func:`plan_soaring` and :func:`make_planner` build the SST over
+a :class:`SoaringModel` (:class:`~baselines.sst.soaring.SoaringProblem`) for a named or given
+configuration, including :class:`SeededSST`, the SST that starts from a reference search's plan.
+
+(This module sits above :mod:`baselines.reference`, whose search flies edges with the SST's
+soaring adapter and returns :class:`~baselines.sst.plan.Plan` s; nothing below imports it.)
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import fields
+from typing import Any
+
+import numpy as np
+
+from baselines.sst.core import SST, SSTParams, SSTResult, SSTStats, check_budget
+from baselines.sst.plan import PlanningResult, plan_from_result
+from baselines.sst.reference import ReferenceSST
+from baselines.sst.soaring import S_CHI, S_E, S_H, S_N, S_T, S_V, SST_CONFIGS, SoaringProblem, SoaringSSTConfig
+from soaring_env._validation import ConfigError, check_bool, check_seed
+from soaring_env.model import SoaringModel
+
+#: Most of a :class:`SeededSST` budget spent looking for a first solution before the seeding search.
+FIRST_SHARE = 0.1
+
+
+class SeededSST(SST):
+    """SST that starts from the plan of a short reference beam search (``seed_width > 0``).
+
+    The first call of :meth:`run` (a) runs SST rounds until the first solution (at most
+    ``FIRST_SHARE`` of the budget) -- the goal completions usually give it within milliseconds, as
+    without a seed; (b) runs the reference search (:func:`baselines.reference.search`: the
+    deterministic beam over the same action set, with cell dominance and the admissible potential
+    bound) with widths ``seed_start_width``, twice that, ... up to ``seed_width``, as long as the
+    next one is expected to fit into ``seed_share`` of the budget (a doubled width takes about
+    twice as long); each beam is seeded with the tree's best plan (its controls join the
+    continuous control grid), so it keeps that plan's nodes at every depth and can only improve on
+    it, and (c) its plan is inserted into the tree at once (:meth:`SST.insert_path`); (d) the rest
+    of the budget goes to SST as usual: the refinements perturb the inserted plan edge by edge, and the
+    random expansions go on, so SST's probabilistic completeness and asymptotic near-optimality are
+    kept (the seed only adds nodes). The search's time and edges count in ``stats`` (``elapsed``,
+    ``iterations``, ``seed_edges``). An iteration budget counts SST's random expansions and the
+    search's edges (``seed_share`` of it for the search, in edges: the plan is deterministic); with
+    a wall-clock budget the search runs as wide a beam as fits.
+    Later calls of :meth:`run` continue plain SST.
+    """
+
+    def __init__(self, problem: SoaringProblem, params: SSTParams | None = None, seed: int | None = 0) -> None:
+        super().__init__(problem, params, seed)
+        self.soaring_problem = problem
+        self.seeded = False
+        #: the seeding searches run: (beam width, cost found [J/kg] (inf: none), edges flown, seconds)
+        self.seed_searches: list[tuple[int, float, int, float]] = []
+
+    def run(
+        self,
+        time_limit: float | None = None,
+        max_iterations: int | None = None,
+        *,
+        callback: Callable[[SSTStats], None] | None = None,
+    ) -> SSTResult:
+        """As :meth:`SST.run`; the first call seeds the tree (see the class docstring)."""
+        if self.seeded:
+            return super().run(time_limit, max_iterations, callback=callback)
+        from baselines.reference.beam import ReferenceConfig, search  # (the layer above: see the module)
+
+        t_lim, n_lim = check_budget(time_limit, max_iterations)
+        self.seeded = True
+        t_start = time.perf_counter()
+        # (a) SST rounds until its first solution, for at most FIRST_SHARE of the budget; an
+        # iteration budget counts random expansions (as SST's does) and the search's edges
+        used_n = 0
+        while True:
+            first = self.params.batch_size if n_lim is None else min(self.params.batch_size, n_lim - used_n)
+            res = super().run(max_iterations=first, callback=callback)
+            used_n += first
+            if (
+                res.solved
+                or (t_lim is not None and time.perf_counter() - t_start >= FIRST_SHARE * t_lim)
+                or (n_lim is not None and used_n >= FIRST_SHARE * n_lim)
+            ):
+                break
+        # (b) the reference search, one width at a time (32, 64, ...), each seeded with the best plan
+        # so far and inserted at once: iterative widening as in `search`, with an anytime record
+        p, cfg = self.soaring_problem, self.soaring_problem.config
+        root = p.root_state()
+        vp = float(root[S_V])
+        max_edges = self.params.max_depth or ReferenceConfig().max_edges
+        seed_n = 0
+        last_s = last_n = 0.0
+        width = min(cfg.seed_start_width, cfg.seed_width)
+        while True:
+            share_t = None if t_lim is None else cfg.seed_share * t_lim - (time.perf_counter() - t_start)
+            share_n = None if n_lim is None else int(cfg.seed_share * n_lim) - used_n - seed_n
+            if (share_t is not None and share_t <= 2.0 * last_s) or (share_n is not None and share_n <= 2.0 * last_n):
+                break  # (a doubled beam takes about twice as long)
+            best = self.result()
+            found = search(
+                p.model,
+                p.kind,
+                ReferenceConfig(
+                    beam_width=width, start_width=width, max_edges=max_edges, progress_weight=cfg.seed_progress_weight
+                ),
+                seed_controls=[best.controls] if best.solved else [],
+                start=root[[S_N, S_E, S_CHI, S_H]],
+                t0=float(root[S_T]),
+                airspeed_prev=None if math.isnan(vp) else vp,
+                time_limit=share_t,
+                max_rollouts=share_n,
+            )
+            seed_n += found.rollouts
+            last_s, last_n = found.seconds, float(found.rollouts)
+            self.insert_path(found.plan.controls(), seconds=found.seconds, edges=found.rollouts)
+            self.seed_searches.append((width, found.cost, found.rollouts, found.seconds))
+            if callback is not None:
+                callback(self.stats)
+            if width >= cfg.seed_width:
+                break
+            width = min(2 * width, cfg.seed_width)
+        rest_t = None if t_lim is None else t_lim - (time.perf_counter() - t_start)
+        rest_n = None if n_lim is None else n_lim - used_n - seed_n
+        if (rest_t is not None and rest_t <= 0.0) or (rest_n is not None and rest_n <= 0):
+            return self.result()
+        return super().run(rest_t, rest_n, callback=callback)
+
+
+def make_planner(
+    model: SoaringModel,
+    sampler: str = "primitive",
+    *,
+    config: SoaringSSTConfig | Mapping[str, Any] | str | None = None,
+    seed: int | None = 0,
+    start: np.ndarray | None = None,
+    t0: float = 0.0,
+    airspeed_prev: float | None = None,
+    reference: bool = False,
+) -> tuple[SoaringProblem, SST | ReferenceSST]:
+    """Build the soaring problem and an SST planner over it (``reference=True``: the plain
+    :class:`ReferenceSST`; ``config.seed_width > 0``: :class:`SeededSST`). Arguments as in
+    :func:`plan_soaring`."""
+    cfg = as_sst_config(config)
+    check_seed("seed", seed)
+    check_bool("reference", reference)
+    if reference and cfg.seed_width:
+        raise ConfigError(f"reference=True plans without a seeding search; set seed_width=0 (got {cfg.seed_width!r})")
+    problem = SoaringProblem(model, sampler, cfg, start=start, t0=t0, airspeed_prev=airspeed_prev)
+    params = SSTParams(
+        selection_radius=cfg.selection_radius,
+        pruning_radius=cfg.pruning_radius,
+        batch_size=cfg.batch_size,
+        max_depth=cfg.max_edges,
+        completions=cfg.completions,
+        completion_depth=cfg.completion_depth,
+        refinements=cfg.refinements,
+    )
+    if reference:
+        return problem, ReferenceSST(problem, params, seed=seed)
+    return problem, (SeededSST if cfg.seed_width else SST)(problem, params, seed=seed)
+
+
+def as_sst_config(config: SoaringSSTConfig | Mapping[str, Any] | str | None) -> SoaringSSTConfig:
+    """A :class:`SoaringSSTConfig` from itself, a dict of its fields, a name of ``SST_CONFIGS`` or
+    None (the defaults); unknown names, keys and other types raise a :class:`ConfigError` with
+    what is allowed."""
+    if config is None:
+        return SoaringSSTConfig()
+    if isinstance(config, str):
+        if config not in SST_CONFIGS:
+            raise ConfigError(
+                f"config={config!r} is not a named configuration; allowed: {', '.join(map(repr, SST_CONFIGS))}"
+            )
+        return SST_CONFIGS[config]
+    if isinstance(config, SoaringSSTConfig):
+        return config
+    names = [f.name for f in fields(SoaringSSTConfig)]
+    if isinstance(config, Mapping):
+        unknown = sorted(str(k) for k in config if k not in names)
+        if unknown:
+            raise ConfigError(f"config has unknown key(s) {unknown!r}; allowed: {', '.join(names)}")
+        return SoaringSSTConfig(**config)
+    raise ConfigError(
+        f"config={config!r} has type {type(config).__name__}; a SoaringSSTConfig, a dict of its fields "
+        f"({', '.join(names)}), a name of SST_CONFIGS or None is required"
+    )
+
+
+def plan_soaring(
+    model: SoaringModel,
+    sampler: str = "primitive",
+    *,
+    time_limit: float | None = None,
+    max_iterations: int | None = None,
+    seed: int | None = 0,
+    config: SoaringSSTConfig | Mapping[str, Any] | str | None = None,
+    start: np.ndarray | None = None,
+    t0: float = 0.0,
+    airspeed_prev: float | None = None,
+    partial: bool = False,
+    reference: bool = False,
+) -> PlanningResult:
+    """Plan from the scenario's start (or ``start``) to its goal region with SST.
+
+    :param model: the flight model (scenario, aircraft, primitives) -- SST knows the thermal field.
+    :param sampler: ``"primitive"`` (174 primitives) or ``"continuous"`` (the continuous envelope).
+    :param time_limit: wall-clock budget [s].
+    :param max_iterations: iteration budget (at least one budget is required).
+    :param seed: planner seed (same seed, same budget in iterations -> same plan).
+    :param config: radii, distance weights, batch size, the seeding search (a
+        :class:`SoaringSSTConfig`, a dict of its fields, or the name of one of ``SST_CONFIGS``).
+    :param start: start state ``[Pn, Pe, chi, h]``; default the scenario's start.
+    :param t0: start time [s].
+    :param airspeed_prev: airspeed before the start [m/s] (None: the first edge pays no kinetic term).
+    :param partial: if no solution is found, return the path to the tree node nearest the goal
+        centre (for receding-horizon use) instead of an empty plan.
+    :param reference: use the plain unbatched :class:`ReferenceSST` (slow; for comparisons).
+    :returns: the plan (``plan.solved`` tells whether it reaches the goal) and the statistics;
+        no solution within the budget is a normal result.
+    """
+    problem, planner = make_planner(
+        model,
+        sampler,
+        config=config,
+        seed=seed,
+        start=start,
+        t0=t0,
+        airspeed_prev=airspeed_prev,
+        reference=reference,
+    )
+    check_bool("partial", partial)
+    res = planner.run(time_limit=time_limit, max_iterations=max_iterations)
+    if not res.solved and partial:
+        tree = planner.tree()
+        g = model.scenario.require_goal()
+        d = g.distance(tree.states[:, 0], tree.states[:, 1], tree.states[:, 3])
+        res = planner.result_for(int(tree.ids[int(np.argmin(d))]))
+    return PlanningResult(plan=plan_from_result(problem, res), stats=res.stats)
