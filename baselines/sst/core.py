@@ -567,7 +567,12 @@ class SST:
 
         :returns: whether the path became the best solution.
         """
-        u = np.asarray(controls, np.float64).reshape(-1, self._cdim)
+        try:
+            u = np.asarray(controls, np.float64).reshape(-1, self._cdim)
+        except (TypeError, ValueError) as exc:
+            raise SSTError(f"controls must be rows of {self._cdim} numbers ({exc})") from None
+        if not np.all(np.isfinite(u)):
+            raise SSTError(f"controls={controls!r} must be finite numbers")
         self.stats.elapsed += _positive("seconds", seconds) if seconds else 0.0
         self.stats.iterations += _int("edges", edges, 0)
         self.stats.seed_edges += edges
