@@ -709,7 +709,7 @@ def plot_boxes(results: Mapping[str, Any], png: str | Path) -> Path:
     plt = _plt()
     agents = _agent_order(results)
     eps = results["episodes"]
-    fig, axes = plt.subplots(1, 3, figsize=(17, 4.8), constrained_layout=True)
+    fig, axes = plt.subplots(1, 3, figsize=(17, 6.0), constrained_layout=True)
     for ax, key, scale, label in (
         (axes[0], "regret", 1.0, "regret (0 = best known, 1 = ignoring the thermals)"),
         (axes[1], "energy_spent", 1e-3, "energy spent [kJ/kg]"),
@@ -718,11 +718,11 @@ def plot_boxes(results: Mapping[str, Any], png: str | Path) -> Path:
         data = [
             [scale * e[key] for e in eps if e["agent"] == a and e["success"] and e.get(key) is not None] for a in agents
         ]
-        ticks = [f"{a}\n({len(d)} ok)" for a, d in zip(agents, data, strict=True)]
+        ticks = [f"{a} ({len(d)} ok)" for a, d in zip(agents, data, strict=True)]  # one line: many agents
         pos = [i for i, d in enumerate(data) if d]
         if pos:
             ax.boxplot([data[i] for i in pos], positions=pos, widths=0.6, showmeans=True)
-        ax.set_xticks(range(len(agents)), ticks, rotation=30, ha="right", fontsize=8)
+        ax.set_xticks(range(len(agents)), ticks, rotation=60, ha="right", rotation_mode="anchor", fontsize=8)
         ax.set_xlim(-0.6, len(agents) - 0.4)
         ax.set_ylabel(label)
         ax.grid(axis="y", alpha=0.3)

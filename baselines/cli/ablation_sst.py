@@ -18,7 +18,9 @@ is measured against the reference table (``scripts/reference.py``) of the same s
     python scripts/ablation_sst.py --time 2 --seeds 2 --out /tmp/abl   # a quick look
 
 Writes ``<out>/runs.json`` (every run, resumable: finished runs are kept and skipped, written
-atomically; one writer per folder), ``<out>/ablation.md`` (the table) and ``<out>/anytime.png``
+atomically; one writer per folder; a run is keyed by its row, scenario, sampler, seed, time and a
+digest of the row's planner settings and steering rule, so a row whose settings changed runs
+again, and the older runs stay in the file), ``<out>/ablation.md`` (the table) and ``<out>/anytime.png``
 (median regret against planning time, paper vs soaring). Wall-clock budgets: run it on a quiet
 machine, one worker per core at most; the table reports the CPU share each run got.
 """
@@ -27,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import hashlib
 import json
 import math
 import time
@@ -40,7 +43,7 @@ from baselines.backends import run_jobs
 from baselines.evaluation import heldout_names, resolve_scenario
 from baselines.reference import load_reference, reference_path, regret
 from baselines.sst.planner import make_planner
-from baselines.sst.soaring import SAMPLERS, SST_CONFIGS, SoaringSSTConfig
+from baselines.sst.soaring import SAMPLERS, SST_CONFIGS, STEERING_VERSION, SoaringSSTConfig
 from soaring_env.model import SoaringModel
 from soaring_env.scenario import atomic_write_text
 
@@ -85,7 +88,7 @@ def _run(job: dict[str, Any]) -> dict[str, Any]:
     cpu = time.process_time() - c0
     st = res.stats
     return {
-        **{k: job[k] for k in ("row", "scenario", "sampler", "seed", "time")},
+        **{k: job[k] for k in ("row", "scenario", "sampler", "seed", "time", "settings")},
         "cost": st.best_cost if res.solved else None,
         "history": [[t, c] for t, _, c in st.cost_history],
         "iterations": st.iterations,
@@ -95,8 +98,15 @@ def _run(job: dict[str, Any]) -> dict[str, Any]:
     }
 
 
+def settings_digest(config: dict[str, Any]) -> str:
+    """A digest of a row's planner settings and the steering rule's version: a run recorded with
+    other settings is stale and runs again (the row names stay while their settings change)."""
+    blob = json.dumps({"config": config, "steering": STEERING_VERSION}, sort_keys=True)
+    return hashlib.sha256(blob.encode()).hexdigest()[:16]
+
+
 def _key(r: dict[str, Any]) -> str:
-    return f"{r['row']}|{r['scenario']}|{r['sampler']}|{r['seed']}|{r['time']:g}"
+    return f"{r['row']}|{r['scenario']}|{r['sampler']}|{r['seed']}|{r['time']:g}|{r.get('settings', '')}"
 
 
 def cost_at(run: dict[str, Any], t: float) -> float:
@@ -239,7 +249,10 @@ def plot_anytime(runs: list[dict[str, Any]], refs: dict[str, Any], time_limit: f
         ax.set_xlabel("planning time [s] (one core)")
         ax.set_title(f"{sampler} sampler")
         ax.set_ylim(-0.1, 1.6)
-        ax.legend(fontsize=7, loc="upper right", framealpha=0.9)
+        if labels:
+            ax.legend(fontsize=7, loc="upper right", framealpha=0.9)
+        else:  # a run restricted to the other sampler
+            ax.text(0.5, 0.5, "not run", transform=ax.transAxes, ha="center", color="0.5")
     axes[0].set_ylabel("median regret (0 = reference, 1 = ignoring the thermals)")
     fig.suptitle("SST anytime regret: paper configuration vs soaring configuration and its ablations")
     fig.tight_layout()
@@ -289,7 +302,15 @@ def main(argv: list[str] | None = None) -> int:
                 continue  # the glide mixture acts on the continuous sampler only: rows equal to others
             cfg = dataclasses.asdict(cfgs[row])
             jobs.append(
-                {"row": row, "scenario": name, "sampler": sampler, "seed": seed, "time": args.time, "config": cfg}
+                {
+                    "row": row,
+                    "scenario": name,
+                    "sampler": sampler,
+                    "seed": seed,
+                    "time": args.time,
+                    "config": cfg,
+                    "settings": settings_digest(cfg),
+                }
             )
     runs = run_all(jobs, out, args.workers, not args.no_progress)
     summary = summarize(runs, args.time, refs)
