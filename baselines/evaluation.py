@@ -32,7 +32,7 @@ import math
 import platform
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -214,7 +214,7 @@ def agent_spec(name: str, config: EvalConfig) -> AgentSpec:
 
             # a change of the configuration or of the steering rule redoes these episodes on resume
             settings["planner"] = planner
-            settings["config"] = asdict(SST_CONFIGS[planner])
+            settings["config"] = SST_CONFIGS[planner].acting_settings()
             settings["steering"] = STEERING_VERSION
 
         def make_sst() -> Any:

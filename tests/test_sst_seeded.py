@@ -215,3 +215,17 @@ def test_bad_seeded_planner_input(tiny: SoaringModel) -> None:
         search(tiny, "continuous", ReferenceConfig(beam_width=4, start_width=4), max_rollouts=0)
     with pytest.raises(SSTError, match="time_limit"):
         search(tiny, "continuous", ReferenceConfig(beam_width=4, start_width=4), time_limit=float("nan"))
+
+
+def test_acting_settings_leave_out_the_seed_fields_only_when_off() -> None:
+    """Results keyed by a configuration (evaluation, ablation) must not go stale when a setting that
+    is off is added: the soaring configuration's key has no ``seed_*`` fields, the seeded one's has."""
+    from baselines.evaluation import EvalConfig, agent_spec
+
+    soar, seeded = SST_CONFIGS["soaring"].acting_settings(), SST_CONFIGS["seeded"].acting_settings()
+    assert not any(k.startswith("seed_") for k in soar)
+    assert {k: v for k, v in seeded.items() if not k.startswith("seed_")} == soar
+    assert seeded["seed_width"] == SST_CONFIGS["seeded"].seed_width > 0
+    assert dataclasses.replace(SST_CONFIGS["soaring"], seed_share=0.5).acting_settings() == soar
+    assert agent_spec("sst-soaring-continuous", EvalConfig()).settings["config"] == soar
+    assert agent_spec("sst-seeded-continuous", EvalConfig()).settings["config"] == seeded

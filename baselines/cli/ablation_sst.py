@@ -98,10 +98,11 @@ def _run(job: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def settings_digest(config: dict[str, Any]) -> str:
-    """A digest of a row's planner settings and the steering rule's version: a run recorded with
-    other settings is stale and runs again (the row names stay while their settings change)."""
-    blob = json.dumps({"config": config, "steering": STEERING_VERSION}, sort_keys=True)
+def settings_digest(config: SoaringSSTConfig) -> str:
+    """A digest of a row's planner settings (those that act) and the steering rule's version: a run
+    recorded with other settings is stale and runs again (the row names stay while their settings
+    change)."""
+    blob = json.dumps({"config": config.acting_settings(), "steering": STEERING_VERSION}, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
@@ -300,7 +301,7 @@ def main(argv: list[str] | None = None) -> int:
         for row, name, seed in plan:
             if sampler == "primitive" and row in ("soaring without glide mixture", "paper + glide mixture"):
                 continue  # the glide mixture acts on the continuous sampler only: rows equal to others
-            cfg = dataclasses.asdict(cfgs[row])
+            cfg = dataclasses.asdict(cfgs[row])  # (every field: the worker rebuilds the configuration)
             jobs.append(
                 {
                     "row": row,
@@ -309,7 +310,7 @@ def main(argv: list[str] | None = None) -> int:
                     "seed": seed,
                     "time": args.time,
                     "config": cfg,
-                    "settings": settings_digest(cfg),
+                    "settings": settings_digest(cfgs[row]),
                 }
             )
     runs = run_all(jobs, out, args.workers, not args.no_progress)

@@ -31,7 +31,8 @@ edges are invalid.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 
@@ -169,6 +170,16 @@ class SoaringSSTConfig:
         )
         if self.seed_width and not self.seed_share > 0.0:
             raise ConfigError(f"seed_share={self.seed_share!r} must be > 0 when seed_width > 0; allowed: (0, 1]")
+
+    def acting_settings(self) -> dict[str, Any]:
+        """The settings as a dict (``dataclasses.asdict``) without those that do nothing here: the
+        ``seed_*`` fields when ``seed_width`` is 0. Results keyed by a configuration (the evaluation,
+        the ablation) use it, so that adding a setting that is off does not make them stale."""
+        out = asdict(self)
+        if not self.seed_width:
+            for name in [k for k in out if k.startswith("seed_")]:
+                del out[name]
+        return out
 
 
 #: Version of the completions' steering rule (:meth:`SoaringProblem.goal_controls`): bump it when
