@@ -12,7 +12,7 @@ import pytest
 import baselines.cli.ablation_sst as abl
 
 ROOT = Path(__file__).resolve().parents[1]
-ARGS = ["--heldout", "--n-heldout", "1", "--heldout-rows", "soaring", "--samplers", "primitive", "--time", "0.3"]
+ARGS = ["--heldout", "--n-heldout", "1", "--heldout-rows", "soaring", "--samplers", "primitive", "--time", "1"]
 
 
 def _runs(out: Path) -> list[dict]:
