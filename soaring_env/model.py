@@ -212,7 +212,12 @@ class SoaringModel:
         An edge reaches the goal if one of its N points lies in the goal region before any point
         hits the ground or leaves the domain; ``FLYING`` edges have index N - 1.
         """
-        s = np.ascontiguousarray(result.states)
+        return self.classify_points(result.states)
+
+    def classify_points(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`classify` of edges given by their output points (B, N, 4) [Pn, Pe, chi, h]
+        (``Rollout.states``, or the ``states`` of :meth:`Propagator.run`)."""
+        s = np.ascontiguousarray(points)
         b = s.shape[0]
         codes = np.empty(b, dtype=np.int64)
         ks = np.empty(b, dtype=np.int64)

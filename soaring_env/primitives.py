@@ -398,7 +398,7 @@ def rollout(
             raise ConfigError(f"control airspeed {u[:, 0].min()!r} must be > 0 m/s")
         if np.any(np.abs(u[:, 2]) >= math.pi / 2):
             raise ConfigError(f"control gamma {np.abs(u[:, 2]).max()!r} must lie in (-pi/2, pi/2) rad")
-        ctrl = np.ascontiguousarray(np.stack([u[:, 0], u[:, 2], u[:, 1], u[:, 1]], axis=1))
+        ctrl = control_rows(u)
         climb = float(np.max(u[:, 0] * np.sin(np.abs(u[:, 2]))))
     dur = lib.duration if duration is None else check_duration("duration", duration)
     check_substep("max_substep", max_substep)
@@ -441,6 +441,12 @@ def rollout(
         max_bank=out_terms[:, 4],
         min_height=out_terms[:, 5],
     )
+
+
+def control_rows(control: np.ndarray) -> np.ndarray:
+    """Kernel rows ``(v_a, gamma, chi_dot_1, chi_dot_2)`` (B, 4), C-contiguous, of constant
+    physical controls ``(v_a [m/s], chi_dot [rad/s], gamma [rad])`` (B, 3) (no validation)."""
+    return np.ascontiguousarray(np.stack([control[:, 0], control[:, 2], control[:, 1], control[:, 1]], axis=1))
 
 
 class Propagator:

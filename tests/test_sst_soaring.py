@@ -19,7 +19,7 @@ from baselines.sst import (
     make_planner,
     plan_soaring,
 )
-from baselines.sst.soaring import SST_CONFIGS
+from baselines.sst.soaring import S_T, S_V, SST_CONFIGS
 from soaring_env.model import GOAL, SoaringModel
 from soaring_env.scenario import GoalRegion, paper_scenario
 
@@ -244,3 +244,48 @@ def test_soaring_tree_invariants(kind: str, model: SoaringModel) -> None:
     assert planner.stats.removed > 100 and planner.stats.stale > 0
     check_tree_invariants(tree, problem, planner.params)
     np.testing.assert_array_equal(tree.states[:, 4], tree.tcome)
+
+
+@pytest.mark.parametrize("kind", ["primitive", "continuous"])
+def test_problem_propagate_is_the_model_rollout_bit_for_bit(kind: str) -> None:
+    """The planner flies edges through ``model.propagator`` without ``rollout``'s argument checks:
+    end states, costs, durations and outcomes equal ``rollout_*`` + ``classify`` exactly, for random
+    starts in the domain (random times and previous airspeeds, some unknown) and random controls."""
+    sc = paper_scenario()
+    m = SoaringModel(scenario=sc)
+    prob = SoaringProblem(m, kind)
+    rng = np.random.default_rng(5)
+    n = 300
+    b = sc.bounds
+    x = np.column_stack(
+        [
+            rng.uniform(b.north_min, b.north_max, n),
+            rng.uniform(b.east_min, b.east_max, n),
+            rng.uniform(-math.pi, math.pi, n),
+            rng.uniform(1.0, b.height_max, n),
+            rng.uniform(0.0, 600.0, n),
+            np.where(rng.random(n) < 0.2, np.nan, rng.uniform(10.0, 20.0, n)),
+        ]
+    )
+    u = prob.sample_controls(rng, n)
+    e = prob.propagate(x, u)
+    if kind == "primitive":
+        r = m.rollout_primitive(x[:, :4], u[:, 0].astype(np.int64), t0=x[:, S_T], airspeed_prev=x[:, S_V])
+    else:
+        r = m.rollout_control(x[:, :4], m.action_to_control(u), t0=x[:, S_T], airspeed_prev=x[:, S_V])
+    code, k = m.classify(r)
+    assert np.array_equal(e.cost, r.cost)
+    assert np.array_equal(e.states[:, :4], r.states[np.arange(n), k])
+    assert np.array_equal(e.duration, np.where(code == GOAL, r.times[k], m.library.duration))
+    assert len(set(code.tolist())) > 1  # flying and ending edges both occur
+
+
+def test_problem_propagate_refuses_controls_outside_the_action_set() -> None:
+    m = SoaringModel(scenario=paper_scenario())
+    x = SoaringProblem(m, "primitive").root_state()[None, :]
+    with pytest.raises(SSTError, match="primitive"):
+        SoaringProblem(m, "primitive").propagate(x, np.array([[174.0]]))
+    with pytest.raises(SSTError, match="primitive"):
+        SoaringProblem(m, "primitive").propagate(x, np.array([[-1.0]]))
+    with pytest.raises(SSTError, match="outside"):
+        SoaringProblem(m, "continuous").propagate(x, np.array([[1.5, 0.0, 0.0]]))

@@ -7,9 +7,10 @@ evaluation scenario -- lower bound, direct-flight cost and best plan per action 
     python scripts/reference.py --backend ray --address auto   # the scenarios as tasks on a Ray cluster
     python scripts/reference.py --samplers primitive           # one action set (the file keeps the other)
 
-The primitive search is seeded with the plan of a deterministic soaring-SST run
-(``--planner-iterations``, seed 0) besides the direct flight's, so it is never worse than that plan:
-"best known" includes what the planner itself found.
+For both action sets a second search is seeded with the plan of a deterministic soaring-SST run
+(``--planner-iterations``, seed 0) besides the direct flight's, and the cheaper of the two searches
+is kept, so the reference is never worse than that plan: "best known" includes what the planner
+itself found.
 
 Writes one JSON per scenario to ``results/reference/<name>.json`` (atomically, as soon as it is
 done; a rerun resumes and recomputes only files whose settings differ), ``table.md`` and
@@ -36,8 +37,8 @@ from baselines.sst.soaring import SAMPLERS
 from soaring_env._validation import ConfigError
 from soaring_env.scenario import atomic_write_text
 
-#: Expansions of the soaring SST whose primitive plan seeds the reference (the reference is then
-#: never worse than that deterministic plan; see ReferenceConfig.planner_iterations).
+#: Expansions of the soaring SST whose plan seeds the reference's second search (the reference is
+#: then never worse than that deterministic plan; see ReferenceConfig.planner_iterations).
 PLANNER_ITERATIONS = 300_000
 
 
@@ -52,8 +53,8 @@ def main(argv: list[str] | None = None) -> int:
         "--planner-iterations",
         type=int,
         default=PLANNER_ITERATIONS,
-        help=f"primitives: seed the search with the soaring SST's plan after this many expansions "
-        f"(seed 0; 0: none; default {PLANNER_ITERATIONS:,})",
+        help=f"seed a second search with the soaring SST's plan after this many expansions and keep "
+        f"the cheaper (seed 0; 0: one search, no planner; default {PLANNER_ITERATIONS:,})",
     )
     add_backend_args(p, "one per CPU core")
     p.add_argument("--out", type=Path, default=Path("results/reference"), help="output directory")

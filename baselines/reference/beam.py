@@ -129,12 +129,13 @@ class ReferenceConfig:
         plans, with errors in judging its glide, then still has height to use the motor when its
         glide misses the lift. Goal edges are exempt (the goal region may reach lower). 0
         (default): down to the ground, as the yardstick's references are published.
-    :param planner_iterations: for the primitives (:func:`~baselines.reference.compute_reference`;
-        :func:`search` takes its seeds as arguments): random expansions of a deterministic run of
-        the soaring SST (seed 0, :func:`baselines.sst.plan_soaring`) whose plan seeds the search
-        beside the direct flight's -- kept in the beam at every depth, so the reference is never
-        worse than that plan; 0: no planner seed. (The continuous planner's controls lie outside the
-        continuous control set: there it could not seed the beam, and it is not run.)
+    :param planner_iterations: (:func:`~baselines.reference.compute_reference`; :func:`search`
+        takes its seeds as arguments): random expansions of a deterministic run of the soaring SST
+        (seed 0, :func:`baselines.sst.plan_soaring`) whose plan seeds a second search beside the
+        direct flight's -- kept in the beam at every depth, so that search is never worse than that
+        plan; the reference is the cheaper of the two searches (a beam is not monotone in its seeds:
+        a seed's nodes take slots and cells). 0: one search, no planner. Both action sets: a
+        continuous plan's controls, which lie outside the continuous control set, join it there.
     """
 
     beam_width: int = 2000

@@ -50,7 +50,7 @@ from soaring_env._validation import (
 from soaring_env.model import FLYING, GOAL, SoaringModel
 from soaring_env.physics.atmosphere import G
 from soaring_env.physics.thermals import COL_BIRTH, COL_DEATH
-from soaring_env.primitives import COL_AIRSPEED, COL_CHI_DOT_1, COL_CHI_DOT_2, COL_GAMMA
+from soaring_env.primitives import COL_AIRSPEED, COL_CHI_DOT_1, COL_CHI_DOT_2, COL_GAMMA, control_rows
 
 SAMPLERS = ("primitive", "continuous")
 #: Columns of the core's state vector.
@@ -276,6 +276,8 @@ class SoaringProblem:
             self._circling = None
             self.control_dim = 3
         self._airspeeds = table[:, COL_AIRSPEED]
+        lib = model.library
+        self._point_times = lib.duration * np.arange(1, lib.n_points + 1) / lib.n_points  # as Rollout.times
         self._h_cap = model.end_height_cap()
         self._thermal_centres = sc.field.centres(t0)
         self._t0 = t0
@@ -494,10 +496,13 @@ class SoaringProblem:
         small = np.abs(w) < 1e-9
         ws = np.where(small, 1.0, w)
         c0 = np.asarray(chi0)[..., None, None]
+        sin0, cos0 = np.sin(c0), np.cos(c0)
+        k_n, k_e = v / ws, -v / ws
 
         def at(tt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            dn = np.where(small, v * tt * np.cos(c0), v / ws * (np.sin(c0 + ws * tt) - np.sin(c0)))
-            de = np.where(small, v * tt * np.sin(c0), -v / ws * (np.cos(c0 + ws * tt) - np.cos(c0)))
+            c = c0 + ws * tt
+            dn = np.where(small, v * tt * cos0, k_n * (np.sin(c) - sin0))
+            de = np.where(small, v * tt * sin0, k_e * (np.cos(c) - cos0))
             return np.asarray(n0)[..., None, None] + dn, np.asarray(e0)[..., None, None] + de
 
         pn, pe = at(t)
@@ -596,30 +601,39 @@ class SoaringProblem:
         return a.astype(np.float64)
 
     def propagate(self, states: np.ndarray, controls: np.ndarray) -> Edges:
-        x = states[:, :4]
-        t0 = states[:, S_T]
-        vp = states[:, S_V]
+        """Fly ``controls`` (primitive indices (n, 1), or normalized actions (n, 3)) from core
+        ``states`` (n, 6) through the model's propagator -- the kernel and arguments ``env.step``
+        uses, so a plan's edges replay bit for bit. ``rollout``'s argument checks are skipped (they
+        cost about 0.5 ms a call, most of a small batch's time): every start lies in the domain
+        (the root is checked, and only valid edges' ends become nodes) and the controls are checked
+        here."""
         m = self.model
+        prop = m.propagator
+        t0 = np.array(states[:, S_T])  # fresh C-contiguous copies (see Propagator.run)
+        vp = np.array(states[:, S_V])
         if self.kind == "primitive":
             idx = controls[:, 0].astype(np.int64)
-            r = m.rollout_primitive(x, idx, t0=t0, airspeed_prev=vp)
+            if len(idx) and (idx.min() < 0 or idx.max() >= len(self._airspeeds)):
+                raise SSTError(f"primitive controls must lie in 0..{len(self._airspeeds) - 1}; got {controls[:, 0]!r}")
+            ctrl = np.take(prop.ctrl_table, idx, axis=0)
             v = self._airspeeds[idx]
         else:
-            u = m.action_to_control(controls)
-            r = m.rollout_control(x, u, t0=t0, airspeed_prev=vp)
+            u = m.action_to_control(controls)  # raises for actions outside [-1, 1]
+            ctrl = control_rows(u)
             v = u[:, 0]
-        code, k = m.classify(r)
+        points, terms = prop.run(np.array(states[:, :4], order="C"), t0, vp, ctrl)
+        code, k = m.classify_points(points)
         rows = np.arange(len(k))
         out = np.empty((len(k), 6))
-        out[:, :4] = r.states[rows, k]
+        out[:, :4] = points[rows, k]
         # the env advances its clock by Ts per step; a goal edge counts up to its first goal point
-        dur = np.where(code == GOAL, r.times[k], self.model.library.duration)
+        dur = np.where(code == GOAL, self._point_times[k], prop.duration)
         out[:, S_T] = t0 + dur
         out[:, S_V] = v
         outcome = np.where(code == FLYING, EDGE_VALID, np.where(code == GOAL, EDGE_GOAL, EDGE_INVALID))
         # no plan ends above h_cap, and fuel + kinetic >= 0: from height h at least -g (h_cap - h) to go
         togo = -G * (self._h_cap - out[:, S_H]) if self.config.cost_bound else None
-        return Edges(states=out, cost=r.cost, duration=dur, outcome=outcome, togo=togo)
+        return Edges(states=out, cost=terms[:, 3], duration=dur, outcome=outcome, togo=togo)
 
     # --- env actions ----------------------------------------------------------------------------
     def to_action(self, control: np.ndarray) -> int | np.ndarray:

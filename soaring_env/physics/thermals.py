@@ -342,13 +342,15 @@ class WindField:
             cycle and fluctuation).
         """
         shape, arrays = broadcast_flat(north, east, height, t)
-        for name, a in zip(("north", "east", "height", "t"), arrays, strict=True):
-            if not np.all(np.isfinite(a)):
-                raise ConfigError(f"{name} contains non-finite values; all points must be finite")
         n, e, h, tt = arrays
         out = np.empty(n.shape)
         dvx, dvy = (self.wind_north, self.wind_east) if self.drift else (0.0, 0.0)
-        _updraft_many(n, e, h, tt, self._packed, self.model_code, self.zi, dvx, dvy, out)
+        # the kernel checks the inputs (four numpy reductions cost more than the updrafts of a
+        # few hundred points) and stops at the first non-finite one
+        if _updraft_many(n, e, h, tt, self._packed, self.model_code, self.zi, dvx, dvy, out) >= 0:
+            for name, a in zip(("north", "east", "height", "t"), arrays, strict=True):
+                if not np.all(np.isfinite(a)):
+                    raise ConfigError(f"{name} contains non-finite values; all points must be finite")
         return out.reshape(shape)
 
     def allen_profile(self, height: float, strength: float = 1.0) -> dict[str, float]:
@@ -516,6 +518,11 @@ def updraft_at(
 
 
 @njit(cache=True, fastmath=_FM)
-def _updraft_many(n, e, h, t, th, model, zi, dvx, dvy, out) -> None:
+def _updraft_many(n, e, h, t, th, model, zi, dvx, dvy, out) -> int:
+    """``out[i]`` = the updraft at point i; returns -1, or the first i with a non-finite input
+    (``out`` is then incomplete)."""
     for i in range(n.size):
+        if not (math.isfinite(n[i]) and math.isfinite(e[i]) and math.isfinite(h[i]) and math.isfinite(t[i])):
+            return i
         out[i] = updraft_at(n[i], e[i], h[i], t[i], th, model, zi, dvx, dvy)
+    return -1
