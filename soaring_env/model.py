@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from soaring_env._validation import ConfigError, check_array_finite, check_range, check_type
+from soaring_env._validation import ConfigError, as_float_array, check_array_finite, check_range, check_type
 from soaring_env.physics.aircraft import Aircraft, bank_angle
 from soaring_env.physics.atmosphere import MAX_HEIGHT
 from soaring_env.primitives import (
@@ -217,7 +217,9 @@ class SoaringModel:
     def classify_points(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`classify` of edges given by their output points (B, N, 4) [Pn, Pe, chi, h]
         (``Rollout.states``, or the ``states`` of :meth:`Propagator.run`)."""
-        s = np.ascontiguousarray(points)
+        s = np.ascontiguousarray(as_float_array("points", points))
+        if s.ndim != 3 or s.shape[2] != 4 or s.shape[1] == 0:
+            raise ConfigError(f"points has shape {s.shape}; expected (B, N, 4) [Pn, Pe, chi, h] with N >= 1")
         b = s.shape[0]
         codes = np.empty(b, dtype=np.int64)
         ks = np.empty(b, dtype=np.int64)

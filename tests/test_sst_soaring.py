@@ -289,3 +289,10 @@ def test_problem_propagate_refuses_controls_outside_the_action_set() -> None:
         SoaringProblem(m, "primitive").propagate(x, np.array([[-1.0]]))
     with pytest.raises(SSTError, match="outside"):
         SoaringProblem(m, "continuous").propagate(x, np.array([[1.5, 0.0, 0.0]]))
+
+
+def test_classify_points_refuses_other_shapes() -> None:
+    m = SoaringModel(scenario=paper_scenario())
+    for bad in (np.zeros((3, 4)), np.zeros((2, 5, 3)), np.zeros((2, 0, 4)), "abc"):
+        with pytest.raises(SSTError, match="points"):
+            m.classify_points(bad)

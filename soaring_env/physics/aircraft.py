@@ -32,6 +32,17 @@ THRUST_MODELS = ("trim", "paper")
 TEMPEST_CL_MAX = 1.27
 
 
+#: Allowed ranges [low, high] of the aircraft's physical fields (units as in :class:`Aircraft`).
+PHYSICAL_RANGES = {
+    "mass": (1e-3, 1e5),
+    "wing_area": (1e-4, 1e3),
+    "aspect_ratio": (0.5, 100.0),
+    "oswald": (0.05, 1.0),
+    "eta_ec": (0.01, 1.0),
+    "eta_p": (0.01, 1.0),
+}
+
+
 @dataclass(frozen=True)
 class Aircraft:
     """Point-mass aircraft with a parabolic drag polar; defaults are the Tempest UAS.
@@ -54,6 +65,9 @@ class Aircraft:
         (:meth:`lift_coefficient`) are masked in the envs, invalid for the planners and outside the
         continuous envelope (:class:`~soaring_env.primitives.ControlEnvelope`). ``TEMPEST_CL_MAX``
         is the tasks' value.
+
+    Mass, wing area, aspect ratio, Oswald factor and both efficiencies must lie in
+    :data:`PHYSICAL_RANGES` (a ``ConfigError`` naming the field otherwise).
     """
 
     mass: float = 6.40
@@ -71,12 +85,13 @@ class Aircraft:
     def __post_init__(self) -> None:
         if self.cl_max is not None:
             object.__setattr__(self, "cl_max", check_range("cl_max", self.cl_max, 0.0, 5.0, low_open=True))
-        for name in ("mass", "wing_area", "aspect_ratio", "oswald", "cl0", "stall_speed"):
-            object.__setattr__(self, name, check_positive(name, getattr(self, name)))
-        check_range("oswald", self.oswald, 0.0, 1.0, low_open=True)
+        # ranges that hold every fixed-wing aircraft from a micro UAV to a large sailplane; values
+        # merely > 0 (e.g. a subnormal mass or efficiency) divide the thrust power to infinity
+        for name, (low, high) in PHYSICAL_RANGES.items():
+            object.__setattr__(self, name, check_range(name, getattr(self, name), low, high))
+        object.__setattr__(self, "cl0", check_range("cl0", self.cl0, 0.0, 5.0, low_open=True))
+        object.__setattr__(self, "stall_speed", check_positive("stall_speed", self.stall_speed))
         object.__setattr__(self, "cd0", check_range("cd0", self.cd0, 0.0, 1.0))
-        object.__setattr__(self, "eta_ec", check_range("eta_ec", self.eta_ec, 0.0, 1.0, low_open=True))
-        object.__setattr__(self, "eta_p", check_range("eta_p", self.eta_p, 0.0, 1.0, low_open=True))
         check_type("thrust_model", self.thrust_model, str)
         check_choice("thrust_model", self.thrust_model, THRUST_MODELS)
 
