@@ -601,7 +601,8 @@ class SSTPlannerAgent:
     :param max_iterations: iteration budget per planning call (None: time only; with an iteration
         budget alone the plans, and so the evaluation, are deterministic).
     :param name: label in results.
-    :param planner: the named planner configuration (``SST_CONFIGS``: ``"soaring"``, ``"seeded"`` or ``"paper"``).
+    :param planner: the named planner configuration (``SST_CONFIGS``: ``"seeded"``, ``"soaring"`` or
+        ``"paper"``; None: the default, ``"seeded"``).
     """
 
     def __init__(
@@ -610,9 +611,11 @@ class SSTPlannerAgent:
         time_limit: float | None = 20.0,
         max_iterations: int | None = None,
         name: str = "sst",
-        planner: str = "soaring",
+        planner: str | None = None,
     ) -> None:
-        from baselines.sst.soaring import SST_CONFIGS
+        from baselines.sst.soaring import DEFAULT_SST_CONFIG, SST_CONFIGS
+
+        planner = DEFAULT_SST_CONFIG if planner is None else planner
 
         if planner not in SST_CONFIGS:
             raise ConfigError(f"planner={planner!r} is unknown; allowed: {', '.join(map(repr, SST_CONFIGS))}")

@@ -14,6 +14,7 @@ from test_reference import TINY
 from baselines.reference import ReferenceConfig, search
 from baselines.sst import SST, SeededSST, SoaringSSTConfig, SSTError, make_planner, plan_soaring
 from baselines.sst.core import SSTParams
+from baselines.sst.planner import seed_widths
 from baselines.sst.soaring import SST_CONFIGS, SoaringProblem
 from soaring_env.model import SoaringModel
 
@@ -193,6 +194,8 @@ def test_seeded_planner_problem_is_the_soaring_problem(tiny: SoaringModel) -> No
         ({"seed_width": -1}, "seed_width"),
         ({"seed_width": 2.5}, "seed_width"),
         ({"seed_start_width": 0}, "seed_start_width"),
+        ({"seed_scout_width": -1}, "seed_scout_width"),
+        ({"seed_scout_width": "8"}, "seed_scout_width"),
         ({"seed_share": 1.5}, "seed_share"),
         ({"seed_share": "half"}, "seed_share"),
         ({"seed_width": 64, "seed_share": 0.0}, "seed_share"),
@@ -202,6 +205,18 @@ def test_seeded_planner_problem_is_the_soaring_problem(tiny: SoaringModel) -> No
 def test_bad_seed_settings_name_the_field(kwargs: dict, field: str) -> None:
     with pytest.raises(SSTError, match=field):
         SoaringSSTConfig(**kwargs)
+
+
+def test_seed_widths() -> None:
+    """The scout beam first when it is narrower than the doubling's start, then the doubling up to
+    seed_width (which ends it even when not a power of two times the start)."""
+    base = SST_CONFIGS["seeded"]
+    assert seed_widths(base) == [8, 32, 64, 128, 256, 512]
+    assert seed_widths(dataclasses.replace(base, seed_scout_width=0)) == [32, 64, 128, 256, 512]
+    assert seed_widths(dataclasses.replace(base, seed_start_width=8)) == [8, 16, 32, 64, 128, 256, 512]
+    assert seed_widths(dataclasses.replace(base, seed_width=100)) == [8, 32, 64, 100]
+    assert seed_widths(dataclasses.replace(base, seed_width=16)) == [8, 16]
+    assert seed_widths(SST_CONFIGS["soaring"]) == []
 
 
 def test_bad_seeded_planner_input(tiny: SoaringModel) -> None:
@@ -229,3 +244,32 @@ def test_acting_settings_leave_out_the_seed_fields_only_when_off() -> None:
     assert dataclasses.replace(SST_CONFIGS["soaring"], seed_share=0.5).acting_settings() == soar
     assert agent_spec("sst-soaring-continuous", EvalConfig()).settings["config"] == soar
     assert agent_spec("sst-seeded-continuous", EvalConfig()).settings["config"] == seeded
+
+
+@pytest.mark.parametrize("kind", ["primitive", "continuous"])
+def test_search_stops_a_beam_that_cannot_finish_within_the_budget(kind: str) -> None:
+    """From its third depth a beam is projected to the end (every remaining depth like the next):
+    one that would overrun the budget stops at once, says so, and leaves the rest of the budget
+    unspent (on ``paper`` no goal lies within 10 edges, so the 4-wide beam stays full)."""
+    paper = SoaringModel()
+    cfg = ReferenceConfig(beam_width=4, start_width=4, max_edges=10)
+    full = search(paper, kind, cfg)
+    m = full.n_controls
+    assert not full.stopped and full.rollouts == m + 9 * 4 * m  # the root's m, then 4 m per depth
+    short = search(paper, kind, cfg, max_rollouts=full.rollouts - 1)
+    assert short.stopped and short.rollouts == m + 4 * m  # the first two depths, then the projection
+    assert not short.plan.solved
+
+
+def test_seeded_planner_with_a_budget_too_small_for_a_beam_is_sst() -> None:
+    """An iteration budget that no beam fits into: the first beam stops after two depths and the
+    rest goes to SST, which still plans."""
+    paper = SoaringModel()
+    cfg = dataclasses.replace(SST_CONFIGS["seeded"], seed_start_width=4)
+    _, planner = make_planner(paper, "primitive", config=cfg, seed=0)
+    assert isinstance(planner, SeededSST)
+    res = planner.run(max_iterations=20_000)
+    m = int(paper.allowed_primitives().sum())
+    assert [(w, n) for w, _, n, _ in planner.seed_searches] == [(4, m + 4 * m)]
+    assert math.isinf(planner.seed_searches[0][1]) and res.stats.seed_edges == m + 4 * m
+    assert res.solved

@@ -4,6 +4,7 @@ the control mixture, the admissible cost bound (exhaustive enumeration), the goa
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 
@@ -11,7 +12,7 @@ import numpy as np
 import pytest
 
 from baselines.sst import SST, SoaringSSTConfig, SSTError, SSTParams, make_planner, plan_soaring
-from baselines.sst.soaring import SST_CONFIGS, SoaringProblem
+from baselines.sst.soaring import DEFAULT_SST_CONFIG, SST_CONFIGS, SoaringProblem
 from soaring_env.model import SoaringModel
 from soaring_env.physics.aircraft import Aircraft, bank_angle
 from soaring_env.physics.atmosphere import G, air_density
@@ -108,7 +109,9 @@ def test_paper_configuration_is_the_uniform_sampler(model: SoaringModel) -> None
         q2 = prob.space.sample(np.random.default_rng(4), 500)
         assert np.array_equal(q1, q2)
     assert paper.completions == 0 and not paper.cost_bound and paper.glide_share == 0.0
-    assert SoaringSSTConfig() == SST_CONFIGS["soaring"]
+    assert SoaringSSTConfig() == SST_CONFIGS["seeded"] == SST_CONFIGS[DEFAULT_SST_CONFIG]
+    assert SST_CONFIGS["soaring"] == dataclasses.replace(SoaringSSTConfig(), seed_width=0)
+    assert paper.seed_width == 0
 
 
 def test_primitive_circle_draws_are_circles(model: SoaringModel) -> None:
@@ -168,16 +171,18 @@ def test_cost_bound_prunes_and_keeps_k1_equal_to_reference(model: SoaringModel) 
     builds exactly the plain reference's tree."""
     from test_sst_soaring import assert_k1_equals_reference
 
-    cfg = SoaringSSTConfig(batch_size=1, completions=0, refinements=0, thermal_targets=0.3, circle_share=0.2)
+    cfg = SoaringSSTConfig(
+        batch_size=1, completions=0, refinements=0, thermal_targets=0.3, circle_share=0.2, seed_width=0
+    )
     for kind in SAMPLERS:
         assert_k1_equals_reference(model, kind, cfg, seed=5, iterations=3000)
 
 
 def test_reference_sst_refuses_completions(model: SoaringModel) -> None:
     with pytest.raises(SSTError, match="completions"):
-        make_planner(model, "continuous", config=SoaringSSTConfig(), reference=True)
+        make_planner(model, "continuous", config="soaring", reference=True)
     with pytest.raises(SSTError, match="refinements=8"):
-        make_planner(model, "continuous", config=SoaringSSTConfig(completions=0), reference=True)
+        make_planner(model, "continuous", config=SoaringSSTConfig(completions=0, seed_width=0), reference=True)
 
 
 @pytest.mark.parametrize("kind", SAMPLERS)

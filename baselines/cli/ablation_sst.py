@@ -4,10 +4,10 @@ Rows: the paper's planner (``SST_CONFIGS["paper"]``: uniform samplers, no bound)
 planner with the glide mixture (the first step of the cumulative path paper -> + glide mixture ->
 + cost bound = "soaring without goal completions" -> + completions = "soaring without local
 refinement" -> + refinements = soaring), the soaring
-configuration (``SST_CONFIGS["soaring"]``, the default), the soaring configuration with each of
-its measures switched back to the paper's setting (leave one out: a measure earns its place when
-its row is worse than the soaring row), and the soaring configuration plus the seeding reference
-search (``SST_CONFIGS["seeded"]``, row "soaring + reference seed"). Every run plans from the
+configuration (``SST_CONFIGS["soaring"]``), the soaring configuration with each of its measures
+switched back to the paper's setting (leave one out: a measure earns its place when its row is
+worse than the soaring row), and the soaring configuration plus the seeding reference search
+(``SST_CONFIGS["seeded"]``, the default planner, row "soaring + reference seed"). Every run plans from the
 scenario's start for ``--time`` seconds of wall clock on one core (one worker process per core
 with ``--workers``); the anytime record gives the cost after 1, 5 and ``--time`` seconds. Regret
 is measured against the reference table (``scripts/reference.py``) of the same scenario.

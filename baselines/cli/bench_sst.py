@@ -1,8 +1,8 @@
 """Benchmark the SST planner on the paper scenario, one core, serially.
 
 For both samplers (primitive, continuous) and seven variants -- the soaring configuration with the
-seeding reference search (``SST_CONFIGS["seeded"]``), the soaring configuration (the default
-planner, ``SST_CONFIGS["soaring"]``), the paper's planner (``SST_CONFIGS["paper"]``,
+seeding reference search (the default planner, ``SST_CONFIGS["seeded"]``), the soaring
+configuration (``SST_CONFIGS["soaring"]``), the paper's planner (``SST_CONFIGS["paper"]``,
 batched: K expansions per round, K at the end of --help), the paper's planner one expansion at a
 time (K = 1: the published algorithm, grid nearest neighbours) and the plain reference implementation (brute-force
 nearest neighbours, one rollout per iteration), OMPL's SST and RRT -- it prints, as medians over the seeds: iterations

@@ -203,6 +203,7 @@ class SearchResult:
     :param seconds: wall-clock time of the search [s].
     :param depth: deepest depth expanded.
     :param n_controls: size of the control set.
+    :param stopped: whether the budget (``time_limit``, ``max_rollouts``) stopped a beam before its end.
     """
 
     plan: Plan
@@ -211,6 +212,7 @@ class SearchResult:
     seconds: float
     depth: int
     n_controls: int
+    stopped: bool = False
 
 
 def control_set(model: SoaringModel, sampler: str, config: ReferenceConfig) -> np.ndarray:
@@ -325,10 +327,14 @@ def search(
         pays no speed change, as after ``env.reset``).
     :param time_limit: wall-clock budget [s] (None: none): no wider beam is started that would
         need more than the time left (a doubled width takes about twice as long), and a beam stops
-        expanding at the first depth past it (its best plan so far is kept).
+        (its best plan so far is kept) at the first depth past it, or as soon as it is not
+        expected to finish within it: from its third depth on, the rest of the beam is projected
+        as every remaining depth expanding as many edges as the next one, at the beam's rate so
+        far (depths cost about the same once the beam is full; a beam usually runs to
+        ``max_edges``). A search that cannot finish thus gives its time back after a few depths.
     :param max_rollouts: budget in edges flown (None: none), applied the same way but exactly: no
-        depth is expanded that would take the search past it, so a rollout budget gives the same
-        plan on every machine.
+        depth is expanded that would take the search past it, nor one of a beam whose projected
+        edges would, so a rollout budget gives the same plan on every machine.
     :returns: the best plan found (unsolved if none).
     """
     if not isinstance(model, SoaringModel):
@@ -359,11 +365,21 @@ def search(
     best: tuple[float, float, np.ndarray, np.ndarray] | None = None
     rollouts = depth = 0
     last_s = last_n = 0.0  # time and rollouts of the last beam
+    t_beam = t_start
+    stopped = False
 
-    def stop(n_next: int) -> bool:
-        """Whether the budget forbids flying ``n_next`` more edges now."""
-        over_t = t_lim is not None and time.perf_counter() - t_start >= t_lim
-        return over_t or (n_lim is not None and rollouts + n_next > n_lim)
+    def stop(done: int, n_end: int) -> bool:
+        """Whether the budget forbids the beam to go on: it has flown ``done`` edges, and the next
+        depth (or, projected, the whole beam) would take it to ``n_end``."""
+        nonlocal stopped
+        now = time.perf_counter()
+        left = math.inf if t_lim is None else t_lim - (now - t_start)
+        stopped = (
+            left <= 0.0
+            or (n_lim is not None and rollouts + n_end > n_lim)
+            or (done > 0 and (now - t_beam) / done * (n_end - done) > left)
+        )
+        return stopped
 
     for k, width in enumerate(widths):
         if k > 0 and (
@@ -382,6 +398,8 @@ def search(
         rollouts += n_roll
         if found is not None and (best is None or found[0] < best[0]):
             best = found
+        if stopped:
+            break
     if best is None:
         res = SSTResult(False, math.inf, np.zeros((0, 6)), np.zeros((0, ctrls.shape[1])), np.zeros(0), np.zeros(0),
                         SSTStats())  # fmt: skip
@@ -400,6 +418,7 @@ def search(
         seconds=time.perf_counter() - t_start,
         depth=depth,
         n_controls=len(ctrls),
+        stopped=stopped,
     )
 
 
@@ -477,12 +496,14 @@ def _beam(
     width: int,
     seeds: list[np.ndarray],
     progress: Callable[[int, int], None],
-    stop: Callable[[int], bool] | None = None,
+    stop: Callable[[int, int], bool] | None = None,
 ) -> tuple[tuple[float, float, np.ndarray, np.ndarray] | None, int, int]:
     """One beam search of ``width``: ((objective, cost, path states (n + 1, 6), controls (n, c)) of
     the best plan or None, rollouts, deepest depth); the objective is the cost plus
-    ``time_weight`` x its flight time. ``stop(n)`` (the search's budget) is asked before each
-    depth whether its n rollouts may still be flown; if not, the beam ends with its best plan so far."""
+    ``time_weight`` x its flight time. ``stop(done, n_end)`` (the search's budget) is asked before
+    each depth whether the beam, having flown ``done`` edges, may go on to ``n_end``: the end of the
+    next depth, and from the third depth on the end of the whole beam projected as every remaining
+    depth like the next; if not, the beam ends with its best plan so far."""
     problem, ctrls, cfg = ctx.problem, ctx.ctrls, ctx.cfg
     m = len(ctrls)
     gn, ge, gr = ctx.goal
@@ -506,7 +527,8 @@ def _beam(
         x = states[-1]
         jc = costs[-1]
         n = len(x)
-        if stop is not None and stop(rollouts + n * m):
+        # (depths 1 and 2 grow the beam from the root: no projection from them)
+        if stop is not None and stop(rollouts, rollouts + n * m * (cfg.max_edges - depth + 1 if depth > 2 else 1)):
             break
         # children: node-major, control-minor
         par = np.repeat(np.arange(n, dtype=np.int64), m)

@@ -34,9 +34,12 @@ class SeededSST(SST):
     ``FIRST_SHARE`` of the budget) -- the goal completions usually give it within milliseconds, as
     without a seed; (b) runs the reference search (:func:`baselines.reference.search`: the
     deterministic beam over the same action set, with cell dominance and the admissible potential
-    bound) with widths ``seed_start_width``, twice that, ... up to ``seed_width``, as long as the
-    next one is expected to fit into ``seed_share`` of the budget (a doubled width takes about
-    twice as long); each beam is seeded with the tree's best plan (its controls join the
+    bound) with widths ``seed_scout_width`` (a narrow first beam, for an early plan), then
+    ``seed_start_width``, twice that, ... up to ``seed_width`` (:func:`seed_widths`), as long as the
+    next one is expected to fit into ``seed_share`` of the budget (a beam's time grows about as its
+    width; a beam that is not expected to finish, projected from its first depths, stops
+    at once and the search ends: with budgets too short for any beam the planner is plain SST
+    after a few depths' detour); each beam is seeded with the tree's best plan (its controls join the
     continuous control grid), so it keeps that plan's nodes at every depth and can only improve on
     it, and (c) its plan is inserted into the tree at once (:meth:`SST.insert_path`); (d) the rest
     of the budget goes to SST as usual: the refinements perturb the inserted plan edge by edge, and the
@@ -83,20 +86,22 @@ class SeededSST(SST):
                 or (n_lim is not None and used_n >= FIRST_SHARE * n_lim)
             ):
                 break
-        # (b) the reference search, one width at a time (32, 64, ...), each seeded with the best plan
-        # so far and inserted at once: iterative widening as in `search`, with an anytime record
+        # (b) the reference search, one width at a time (8, then 32, 64, ...), each seeded with the
+        # best plan so far and inserted at once: iterative widening as in `search`, with an anytime
+        # record
         p, cfg = self.soaring_problem, self.soaring_problem.config
         root = p.root_state()
         vp = float(root[S_V])
         max_edges = self.params.max_depth or ReferenceConfig().max_edges
         seed_n = 0
         last_s = last_n = 0.0
-        width = min(cfg.seed_start_width, cfg.seed_width)
-        while True:
+        last_w = 1
+        for width in seed_widths(cfg):
             share_t = None if t_lim is None else cfg.seed_share * t_lim - (time.perf_counter() - t_start)
             share_n = None if n_lim is None else int(cfg.seed_share * n_lim) - used_n - seed_n
-            if (share_t is not None and share_t <= 2.0 * last_s) or (share_n is not None and share_n <= 2.0 * last_n):
-                break  # (a doubled beam takes about twice as long)
+            grow = width / last_w  # (a beam's time and edges grow about as its width)
+            if (share_t is not None and share_t <= grow * last_s) or (share_n is not None and share_n <= grow * last_n):
+                break
             best = self.result()
             found = search(
                 p.model,
@@ -112,19 +117,32 @@ class SeededSST(SST):
                 max_rollouts=share_n,
             )
             seed_n += found.rollouts
-            last_s, last_n = found.seconds, float(found.rollouts)
+            last_s, last_n, last_w = found.seconds, float(found.rollouts), width
             self.insert_path(found.plan.controls(), seconds=found.seconds, edges=found.rollouts)
             self.seed_searches.append((width, found.cost, found.rollouts, found.seconds))
             if callback is not None:
                 callback(self.stats)
-            if width >= cfg.seed_width:
-                break
-            width = min(2 * width, cfg.seed_width)
+            if found.stopped:
+                break  # (a beam the budget stopped gave its time back: SST has it)
         rest_t = None if t_lim is None else t_lim - (time.perf_counter() - t_start)
         rest_n = None if n_lim is None else n_lim - used_n - seed_n
         if (rest_t is not None and rest_t <= 0.0) or (rest_n is not None and rest_n <= 0):
             return self.result()
         return super().run(rest_t, rest_n, callback=callback)
+
+
+def seed_widths(config: SoaringSSTConfig) -> list[int]:
+    """The beam widths the seeded planner tries, in order (while they fit into its budget): the
+    scout width if narrower than the start width, then the start width doubled up to
+    ``seed_width`` (none if ``seed_width`` is 0)."""
+    if not config.seed_width:
+        return []
+    w = min(config.seed_start_width, config.seed_width)
+    out = [config.seed_scout_width] if 0 < config.seed_scout_width < w else []
+    while w < config.seed_width:
+        out.append(w)
+        w *= 2
+    return [*out, config.seed_width]
 
 
 def make_planner(
