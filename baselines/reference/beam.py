@@ -289,6 +289,17 @@ def still_air_cost_per_metre(model: SoaringModel, controls: np.ndarray) -> float
     return float(ratio.min()) if np.isfinite(ratio.min()) else 0.0
 
 
+def widening(start: int, widest: int) -> list[int]:
+    """The widths of iterative widening: ``start`` (at most ``widest``), twice that, ... and
+    ``widest`` last."""
+    out = []
+    w = min(start, widest)
+    while w < widest:
+        out.append(w)
+        w *= 2
+    return [*out, widest]
+
+
 def search(
     model: SoaringModel,
     sampler: str = "primitive",
@@ -353,12 +364,7 @@ def search(
         extra = np.unique(np.concatenate(seeds), axis=0)
         extra = extra[~np.any(np.all(extra[:, None, :] == ctrls[None, :, :], axis=2), axis=1)]
         ctrls = np.concatenate([ctrls, extra]) if len(extra) else ctrls
-    widths = []
-    w = min(cfg.start_width, cfg.beam_width)
-    while w < cfg.beam_width:
-        widths.append(w)
-        w *= 2
-    widths.append(cfg.beam_width)
+    widths = widening(cfg.start_width, cfg.beam_width)
     if not (isinstance(battery, (int, float)) and battery > 0.0) or math.isnan(battery):
         raise ConfigError(f"battery={battery!r} must be a number > 0 J/kg (math.inf: no battery)")
     ctx = _Context.make(model, problem, sampler, ctrls, cfg, float(battery))

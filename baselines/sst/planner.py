@@ -135,14 +135,12 @@ def seed_widths(config: SoaringSSTConfig) -> list[int]:
     """The beam widths the seeded planner tries, in order (while they fit into its budget): the
     scout width if narrower than the start width, then the start width doubled up to
     ``seed_width`` (none if ``seed_width`` is 0)."""
+    from baselines.reference.beam import widening  # (the layer above: see the module)
+
     if not config.seed_width:
         return []
-    w = min(config.seed_start_width, config.seed_width)
-    out = [config.seed_scout_width] if 0 < config.seed_scout_width < w else []
-    while w < config.seed_width:
-        out.append(w)
-        w *= 2
-    return [*out, config.seed_width]
+    out = widening(config.seed_start_width, config.seed_width)
+    return [config.seed_scout_width, *out] if 0 < config.seed_scout_width < out[0] else out
 
 
 def make_planner(

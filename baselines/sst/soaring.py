@@ -18,9 +18,10 @@ the model's bank and stall limits, ``model.allowed_primitives()``); ``"continuou
 mapped by ``model.action_to_control`` onto the envelope of the primitives ((v_a, chi_dot, gamma) in
 [10, 20] m/s x +-1080 deg/Ts x +-45 deg), held for Ts. Both are exactly the actions of the discrete
 and continuous envs. The paper's planner (``SST_CONFIGS["paper"]``) draws them uniformly; the
-soaring configuration (the default) mixes in zero-thrust glides, adds the admissible cost bound and
-the greedy goal completions (glide to a thermal, climb, glide home) -- see
-:class:`SoaringSSTConfig` and :meth:`SoaringProblem.goal_controls`.
+soaring configuration mixes in zero-thrust glides, adds the admissible cost bound and the greedy
+goal completions (glide to a thermal, climb, glide home) -- see :class:`SoaringSSTConfig` and
+:meth:`SoaringProblem.goal_controls`; the default (``SST_CONFIGS["seeded"]``) seeds it with
+reference beam searches as well (:class:`baselines.sst.planner.SeededSST`).
 
 An edge is propagated with the same calls ``env.step`` makes (``model.rollout_primitive`` or
 ``model.rollout_control`` with ``t0`` and ``airspeed_prev``, then ``model.classify``): its cost is
