@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -344,6 +345,24 @@ def test_planner_seed_makes_the_reference_no_worse_than_the_planner(tiny: Soarin
         assert energy == p.best_cost
 
 
+def test_every_planner_seed_seeds_the_second_search(tiny: SoaringModel) -> None:
+    """With ``planner_seeds=3`` the reference is no worse than any of the three planner runs'
+    plans (seeds 0, 1, 2, in the pinned configuration) -- the one-seed reference only of seed 0's --
+    and records both settings."""
+    from baselines.sst import plan_soaring
+
+    cfg = ReferenceConfig(beam_width=5, start_width=5, max_edges=6, planner_iterations=2000)
+    one = compute_reference(TINY, ("primitive",), cfg).samplers["primitive"]
+    three = compute_reference(TINY, ("primitive",), dataclasses.replace(cfg, planner_seeds=3)).samplers["primitive"]
+    costs = [plan_soaring(tiny, "primitive", max_iterations=2000, seed=k, config="soaring").plan.cost for k in range(3)]
+    assert three.best_cost <= min(costs) + 1e-9
+    assert one.best_cost <= costs[0] + 1e-9
+    assert three.best_cost < one.best_cost  # here seed 2's plan (400 J/kg) beats the one-seed reference (405)
+    assert three.settings["planner_seeds"] == 3 and three.settings["planner_config"] == "soaring"
+    paper = compute_reference(TINY, ("primitive",), dataclasses.replace(cfg, planner_config="paper"))
+    assert paper.samplers["primitive"].settings["planner_config"] == "paper"
+
+
 @pytest.mark.parametrize(
     ("kwargs", "field"),
     [
@@ -363,6 +382,11 @@ def test_planner_seed_makes_the_reference_no_worse_than_the_planner(tiny: Soarin
         ({"start_width": 0}, "start_width"),
         ({"planner_iterations": -1}, "planner_iterations"),
         ({"planner_iterations": 2.5}, "planner_iterations"),
+        ({"planner_seeds": 0}, "planner_seeds"),
+        ({"planner_seeds": 65}, "planner_seeds"),
+        ({"planner_seeds": "2"}, "planner_seeds"),
+        ({"planner_config": "fast"}, "planner_config"),
+        ({"planner_config": None}, "planner_config"),
         ({"time_weight": -1.0}, "time_weight"),
         ({"time_weight": float("nan")}, "time_weight"),
         ({"time_weight": "1"}, "time_weight"),
@@ -424,3 +448,26 @@ def test_too_fine_cells_or_too_wide_beams_are_refused(tiny: SoaringModel) -> Non
         search(tiny, "primitive", ReferenceConfig(cell_size=1e-4, height_cell=1e-4, course_cells=100_000))
     with pytest.raises(ConfigError, match="beam_width"):
         ReferenceConfig(beam_width=10**9)
+
+
+def test_convergence_cli_keeps_the_other_action_set(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--convergence`` for one action set keeps the other's rows of an earlier run, records the
+    planner settings per row, and shows them in the table; a corrupt file is a clear error."""
+    from baselines.cli.reference import main
+
+    base = ["--convergence", "--out", str(tmp_path), "--beam-width", "4"]
+    assert main([*base, "--samplers", "primitive", "--planner-iterations", "0"]) == 0
+    assert main([*base, "--samplers", "continuous", "--planner-iterations", "500", "--planner-seeds", "2"]) == 0
+    rows = json.loads((tmp_path / "convergence" / "convergence.json").read_text())
+    assert [(r["sampler"], r["beam_width"]) for r in rows] == [
+        ("primitive", 2), ("primitive", 4), ("primitive", 8), ("continuous", 2), ("continuous", 4), ("continuous", 8)
+    ]  # fmt: skip
+    assert {(r["sampler"], r["planner_iterations"], r["planner_seeds"]) for r in rows} == {
+        ("primitive", 0, 4), ("continuous", 500, 2)
+    }  # fmt: skip
+    table = (tmp_path / "convergence" / "convergence.md").read_text()
+    assert "| primitive | 4 | none |" in table and "| continuous | 4 | 2 x 500 it. |" in table
+    (tmp_path / "convergence" / "convergence.json").write_text("[{")
+    with pytest.raises(SystemExit):
+        main([*base, "--samplers", "primitive", "--planner-iterations", "0"])
+    assert "convergence.json" in capsys.readouterr().err

@@ -75,7 +75,7 @@ import numpy as np
 from baselines.reference.bounds import height_cap, without_thermals
 from baselines.sst.core import EDGE_GOAL, EDGE_INVALID, EDGE_VALID, SSTResult, SSTStats
 from baselines.sst.plan import Plan, plan_from_result
-from baselines.sst.soaring import S_CHI, S_E, S_H, S_N, S_V, SAMPLERS, SoaringProblem
+from baselines.sst.soaring import S_CHI, S_E, S_H, S_N, S_V, SAMPLERS, SST_CONFIGS, SoaringProblem
 from soaring_env._validation import ConfigError, check_choice, check_int, check_positive, check_range
 from soaring_env.model import SoaringModel
 from soaring_env.physics.atmosphere import G
@@ -90,6 +90,8 @@ CONTINUOUS_GAMMAS_DEG = (-45.0, -15.0, 0.0, 15.0, 45.0)
 
 #: Largest beam width: the children of one depth (width x controls) are held in memory at once.
 MAX_BEAM_WIDTH = 100_000
+#: Most planner runs seeding the reference's second search (each one's plan is kept in its beam).
+MAX_PLANNER_SEEDS = 64
 _ROWS_PER_CALL = 32768  # rollouts per model call: bounds the (B, N, 4) output to ~30 MB
 
 
@@ -130,12 +132,18 @@ class ReferenceConfig:
         glide misses the lift. Goal edges are exempt (the goal region may reach lower). 0
         (default): down to the ground, as the yardstick's references are published.
     :param planner_iterations: (:func:`~baselines.reference.compute_reference`; :func:`search`
-        takes its seeds as arguments): random expansions of a deterministic run of the soaring SST
-        (seed 0, :func:`baselines.sst.plan_soaring`) whose plan seeds a second search beside the
-        direct flight's -- kept in the beam at every depth, so that search is never worse than that
-        plan; the reference is the cheaper of the two searches (a beam is not monotone in its seeds:
-        a seed's nodes take slots and cells). 0: one search, no planner. Both action sets: a
+        takes its seeds as arguments): random expansions of each deterministic soaring-SST run
+        (:func:`baselines.sst.plan_soaring`) whose plan seeds a second search beside the direct
+        flight's -- kept in the beam at every depth, so that search is never worse than that plan;
+        the reference is the cheaper of the two searches (a beam is not monotone in its seeds: a
+        seed's nodes take slots and cells). 0: one search, no planner. Both action sets: a
         continuous plan's controls, which lie outside the continuous control set, join it there.
+    :param planner_seeds: planner runs, with seeds 0 ... ``planner_seeds - 1``; every distinct plan
+        seeds that second search. SST's result varies much with its seed (on ``random-10019``,
+        primitive, seeds 0, 1, 2 end at 2,428, 2,346 and 2,287 J/kg) and the beam keeps each plan.
+    :param planner_config: the name of the planner's configuration in
+        :data:`baselines.sst.soaring.SST_CONFIGS` (pinned, so that a reference file's settings say
+        which planner seeded it, whatever the planner's default).
     """
 
     beam_width: int = 2000
@@ -151,6 +159,8 @@ class ReferenceConfig:
     region_size: float = 200.0
     region_quota: int = 8
     planner_iterations: int = 0
+    planner_seeds: int = 1
+    planner_config: str = "soaring"
     progress_weight: float = 0.0
     time_weight: float = 0.0
     min_height: float = 0.0
@@ -162,6 +172,10 @@ class ReferenceConfig:
         check_positive("region_size", self.region_size)
         check_int("region_quota", self.region_quota, 0)
         check_int("planner_iterations", self.planner_iterations, 0)
+        check_int("planner_seeds", self.planner_seeds, 1)
+        if self.planner_seeds > MAX_PLANNER_SEEDS:
+            raise ConfigError(f"planner_seeds={self.planner_seeds!r} is too large; allowed: 1..{MAX_PLANNER_SEEDS}")
+        check_choice("planner_config", self.planner_config, tuple(SST_CONFIGS))
         check_int("beam_width", self.beam_width, 1)
         if self.beam_width > MAX_BEAM_WIDTH:
             raise ConfigError(f"beam_width={self.beam_width!r} is too large; allowed: 1..{MAX_BEAM_WIDTH}")

@@ -7,8 +7,8 @@ Per scenario and action set (``"primitive"``: the 174 primitives; ``"continuous"
   the thermals removed ("ignoring the thermals").
 * ``best_cost`` -- the best plan known in the real field: the reference search seeded with the
   direct plan (so it never does worse than flying that plan through the thermals), and with
-  ``planner_iterations`` the cheaper of that and a second search seeded with the soaring planner's
-  plan too (never worse than either plan).
+  ``planner_iterations`` the cheaper of that and a second search seeded with the plans of
+  ``planner_seeds`` soaring-planner runs too (never worse than any of those plans).
 
 Regret: :func:`~baselines.reference.bounds.regret` against ``best_cost`` and ``direct_cost``.
 """
@@ -23,6 +23,8 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from baselines.reference.beam import ReferenceConfig, search
 from baselines.reference.bounds import MIN_GAP, lower_bound, regret, without_thermals
@@ -172,11 +174,17 @@ def compute_reference(
         rollouts = direct.rollouts + best.rollouts
         if cfg_s.planner_iterations:
             # the search is not monotone in its seeds (a seed's nodes take beam slots and cells), so
-            # the planner's plan seeds a second search and the cheaper of the two is kept
-            sst = plan_soaring(model, sampler, max_iterations=cfg_s.planner_iterations, seed=0)
-            rollouts += sst.stats.iterations
-            if sst.plan.solved:
-                alt = search(model, sampler, cfg_s, seed_controls=[*seed, sst.plan.controls()], progress=cb("planner"))
+            # the planners' plans seed a second search and the cheaper of the two is kept
+            plans: list[np.ndarray] = []
+            for k in range(cfg_s.planner_seeds):
+                sst = plan_soaring(
+                    model, sampler, max_iterations=cfg_s.planner_iterations, seed=k, config=cfg_s.planner_config
+                )
+                rollouts += sst.stats.iterations
+                if sst.plan.solved and not any(np.array_equal(sst.plan.controls(), c) for c in plans):
+                    plans.append(sst.plan.controls())
+            if plans:
+                alt = search(model, sampler, cfg_s, seed_controls=[*seed, *plans], progress=cb("planner"))
                 rollouts += alt.rollouts
                 if alt.cost < best.cost:
                     best = alt
