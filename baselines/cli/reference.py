@@ -37,8 +37,8 @@ from baselines.sst.soaring import SAMPLERS
 from soaring_env._validation import ConfigError
 from soaring_env.scenario import atomic_write_text
 
-#: Expansions of the soaring SST whose plan seeds the reference's second search (the reference is
-#: then never worse than that deterministic plan; see ReferenceConfig.planner_iterations).
+#: Expansions of each soaring-SST run whose plan seeds the reference's second search (the reference
+#: is then never worse than those deterministic plans; see ReferenceConfig.planner_iterations).
 PLANNER_ITERATIONS = 300_000
 #: Planner runs (seeds 0 ... 3) whose plans all seed that search: SST's plan varies much with its
 #: seed (primitive, ``random-10002``: 1,070 / 787 / 972 / 1,070 J/kg for seeds 0-3, the beam 943).
@@ -56,8 +56,8 @@ def main(argv: list[str] | None = None) -> int:
         "--planner-iterations",
         type=int,
         default=PLANNER_ITERATIONS,
-        help=f"seed a second search with the soaring SST's plan after this many expansions and keep "
-        f"the cheaper (seed 0; 0: one search, no planner; default {PLANNER_ITERATIONS:,})",
+        help=f"seed a second search with the plans of soaring-SST runs of this many expansions each and "
+        f"keep the cheaper (0: one search, no planner; default {PLANNER_ITERATIONS:,})",
     )
     p.add_argument(
         "--planner-seeds",
