@@ -214,7 +214,7 @@ def agent_spec(name: str, config: EvalConfig) -> AgentSpec:
 
             # a change of the configuration or of the steering rule redoes these episodes on resume
             settings["planner"] = planner
-            settings["config"] = SST_CONFIGS[planner].acting_settings()
+            settings["config"] = SST_CONFIGS[planner].acting_settings(sampler)
             settings["steering"] = STEERING_VERSION
 
         def make_sst() -> Any:

@@ -452,7 +452,8 @@ def test_too_fine_cells_or_too_wide_beams_are_refused(tiny: SoaringModel) -> Non
 
 def test_convergence_cli_keeps_the_other_action_set(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """``--convergence`` for one action set keeps the other's rows of an earlier run, records the
-    planner settings per row, and shows them in the table; a corrupt file is a clear error."""
+    planner settings and the polish depth per row, and shows them in the table; a corrupt file is a
+    clear error."""
     from baselines.cli.reference import main
 
     base = ["--convergence", "--out", str(tmp_path), "--beam-width", "4"]
@@ -466,7 +467,8 @@ def test_convergence_cli_keeps_the_other_action_set(tmp_path: Path, capsys: pyte
         ("primitive", 0, 4), ("continuous", 500, 2)
     }  # fmt: skip
     table = (tmp_path / "convergence" / "convergence.md").read_text()
-    assert "| primitive | 4 | none |" in table and "| continuous | 4 | 2 x 500 it. |" in table
+    assert "| primitive | 4 | none, polish 2 |" in table and "| continuous | 4 | 2 x 500 it., polish 1 |" in table
+    assert {(r["sampler"], r["polish"]) for r in rows} == {("primitive", 2), ("continuous", 1)}
     (tmp_path / "convergence" / "convergence.json").write_text("[{")
     with pytest.raises(SystemExit):
         main([*base, "--samplers", "primitive", "--planner-iterations", "0"])

@@ -19,9 +19,9 @@ from baselines.sst.soaring import SST_CONFIGS, SoaringProblem
 from soaring_env.model import SoaringModel
 
 #: A seeded configuration small enough for tests: beams of 2 and 4 nodes in 90 % of the budget, plans
-#: of at most 8 edges (the tiny scenario's goal is 1-3 primitives away).
+#: of at most 8 edges (the tiny scenario's goal is 1-3 primitives away); no polish (its own test).
 SMALL = dataclasses.replace(
-    SST_CONFIGS["seeded"], seed_width=4, seed_start_width=2, seed_share=0.9, batch_size=512, max_edges=8
+    SST_CONFIGS["seeded"], seed_width=4, seed_start_width=2, seed_share=0.9, batch_size=512, max_edges=8, seed_polish=0
 )
 
 
@@ -243,7 +243,9 @@ def test_acting_settings_leave_out_the_seed_fields_only_when_off() -> None:
     assert seeded["seed_width"] == SST_CONFIGS["seeded"].seed_width > 0
     assert dataclasses.replace(SST_CONFIGS["soaring"], seed_share=0.5).acting_settings() == soar
     assert agent_spec("sst-soaring-continuous", EvalConfig()).settings["config"] == soar
-    assert agent_spec("sst-seeded-continuous", EvalConfig()).settings["config"] == seeded
+    assert agent_spec("sst-seeded-continuous", EvalConfig()).settings["config"] == SST_CONFIGS[
+        "seeded"
+    ].acting_settings("continuous")
 
 
 @pytest.mark.parametrize("kind", ["primitive", "continuous"])
@@ -265,7 +267,7 @@ def test_seeded_planner_with_a_budget_too_small_for_a_beam_is_sst() -> None:
     """An iteration budget that no beam fits into: the first beam stops after two depths and the
     rest goes to SST, which still plans."""
     paper = SoaringModel()
-    cfg = dataclasses.replace(SST_CONFIGS["seeded"], seed_start_width=4)
+    cfg = dataclasses.replace(SST_CONFIGS["seeded"], seed_start_width=4, seed_polish=0)
     _, planner = make_planner(paper, "primitive", config=cfg, seed=0)
     assert isinstance(planner, SeededSST)
     res = planner.run(max_iterations=20_000)
@@ -273,3 +275,60 @@ def test_seeded_planner_with_a_budget_too_small_for_a_beam_is_sst() -> None:
     assert [(w, n) for w, _, n, _ in planner.seed_searches] == [(4, m + 4 * m)]
     assert math.isinf(planner.seed_searches[0][1]) and res.stats.seed_edges == m + 4 * m
     assert res.solved
+
+
+def test_seeded_planner_polishes_its_primitive_plan(tiny: SoaringModel) -> None:
+    """``seed_polish``: after the beams (in ``seed_share - seed_polish_share``) the tree's best plan
+    is polished and inserted -- recorded as a width-0 search, counted in the seed edges, the result
+    no worse than the polished plan, deterministic with an iteration budget, replayed through
+    ``env.step``."""
+    from test_sst_soaring import assert_replays
+
+    kind = "primitive"
+    cfg = dataclasses.replace(SMALL, seed_polish=2, seed_polish_share=0.3)
+    a = plan_soaring(tiny, kind, max_iterations=40_000, seed=3, config=cfg)
+    _, planner = make_planner(tiny, kind, config=cfg, seed=3)
+    b = planner.run(max_iterations=40_000)
+    assert a.plan.solved and a.plan.cost == b.cost and np.array_equal(a.plan.controls(), b.controls)
+    widths = [w for w, *_ in planner.seed_searches]
+    assert widths[-1] == 0 and 0 not in widths[:-1]  # the beams, then the polish
+    assert sum(n for _, _, n, _ in planner.seed_searches) == planner.stats.seed_edges
+    assert b.cost <= planner.seed_searches[-1][1] <= min(c for _, c, _, _ in planner.seed_searches[:-1])
+    assert_replays(a.plan, tiny.scenario)
+    off = SoaringSSTConfig(seed_polish=0, seed_polish_share=0.5)  # the share does nothing then
+    assert off.acting_settings() == SoaringSSTConfig(seed_polish=0).acting_settings()
+    assert not any(k.startswith("seed_polish") for k in off.acting_settings())
+    assert SoaringSSTConfig().acting_settings()["seed_polish"] == 2  # the default polishes
+    # ... the primitives only: continuous results stay keyed without the polish fields
+    assert SoaringSSTConfig().acting_settings("continuous") == off.acting_settings()
+    assert SoaringSSTConfig().acting_settings("primitive") == SoaringSSTConfig().acting_settings()
+    from baselines.evaluation import EvalConfig, agent_spec
+
+    assert "seed_polish" not in agent_spec("sst-seeded-continuous", EvalConfig()).settings["config"]
+    assert agent_spec("sst-seeded-primitives", EvalConfig()).settings["config"]["seed_polish"] == 2
+
+
+def test_seeded_planner_does_not_polish_continuous_plans(tiny: SoaringModel) -> None:
+    """With the continuous sampler ``seed_polish`` does nothing: the beams keep all of
+    ``seed_share`` and the plan is the one without it, bit for bit."""
+    on = dataclasses.replace(SMALL, seed_polish=2, seed_polish_share=0.3)
+    a = plan_soaring(tiny, "continuous", max_iterations=40_000, seed=3, config=on)
+    b = plan_soaring(tiny, "continuous", max_iterations=40_000, seed=3, config=SMALL)
+    assert a.plan.solved and a.plan.cost == b.plan.cost and np.array_equal(a.plan.controls(), b.plan.controls())
+    assert a.stats.seed_edges == b.stats.seed_edges
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field"),
+    [
+        ({"seed_polish": 3}, "seed_polish"),
+        ({"seed_polish": "2"}, "seed_polish"),
+        ({"seed_polish": -1}, "seed_polish"),
+        ({"seed_polish_share": 1.5}, "seed_polish_share"),
+        ({"seed_polish": 2, "seed_polish_share": 0.75}, "seed_polish_share"),  # all of seed_share
+        ({"seed_polish": 2, "seed_polish_share": 0.0}, "seed_polish_share"),
+    ],
+)
+def test_bad_polish_settings_name_the_field(kwargs: dict, field: str) -> None:
+    with pytest.raises(SSTError, match=field):
+        SoaringSSTConfig(**kwargs)

@@ -6,8 +6,9 @@ planner with the glide mixture (the first step of the cumulative path paper -> +
 refinement" -> + refinements = soaring), the soaring
 configuration (``SST_CONFIGS["soaring"]``), the soaring configuration with each of its measures
 switched back to the paper's setting (leave one out: a measure earns its place when its row is
-worse than the soaring row), and the soaring configuration plus the seeding reference search
-(``SST_CONFIGS["seeded"]``, the default planner, row "soaring + reference seed"). Every run plans from the
+worse than the soaring row), the soaring configuration plus the seeding reference search (row
+"soaring + reference seed") and plus the polish of its plan too (``SST_CONFIGS["seeded"]``, the
+default planner, row "soaring + reference seed + polish"). Every run plans from the
 scenario's start for ``--time`` seconds of wall clock on one core (one worker process per core
 with ``--workers``); the anytime record gives the cost after 1, 5 and ``--time`` seconds. Regret
 is measured against the reference table (``scripts/reference.py``) of the same scenario.
@@ -54,8 +55,11 @@ MEASURES: dict[str, dict[str, Any]] = {
     "goal completions": {"completions": 0, "refinements": 0},
     "local refinement": {"refinements": 0},
 }
-#: The row of ``SST_CONFIGS["seeded"]``: the soaring configuration plus the seeding reference search.
+#: The soaring configuration plus the seeding reference search (``SST_CONFIGS["seeded"]`` without
+#: the polish: the default until 2026-12-05).
 SEEDED_ROW = "soaring + reference seed"
+#: The row of ``SST_CONFIGS["seeded"]``, the default: the seeding search and the polish of its plan.
+POLISHED_ROW = "soaring + reference seed + polish"
 CHECKPOINTS = (1.0, 5.0)
 #: Regret at which a plan counts as near-best for the time-to-target column.
 NEAR_BEST = 0.1
@@ -72,7 +76,8 @@ def rows() -> dict[str, SoaringSSTConfig]:
     out["soaring"] = soar
     for name, off in MEASURES.items():
         out[f"soaring without {name}"] = dataclasses.replace(soar, **off)
-    out[SEEDED_ROW] = SST_CONFIGS["seeded"]  # the last step: + the seeding reference search
+    out[SEEDED_ROW] = dataclasses.replace(SST_CONFIGS["seeded"], seed_polish=0)  # + the seeding search
+    out[POLISHED_ROW] = SST_CONFIGS["seeded"]  # the last step: + the polish of its plan
     return out
 
 
@@ -98,11 +103,11 @@ def _run(job: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def settings_digest(config: SoaringSSTConfig) -> str:
-    """A digest of a row's planner settings (those that act) and the steering rule's version: a run
-    recorded with other settings is stale and runs again (the row names stay while their settings
-    change)."""
-    blob = json.dumps({"config": config.acting_settings(), "steering": STEERING_VERSION}, sort_keys=True)
+def settings_digest(config: SoaringSSTConfig, sampler: str | None = None) -> str:
+    """A digest of a row's planner settings (those that act with ``sampler``) and the steering
+    rule's version: a run recorded with other settings is stale and runs again (the row names stay
+    while their settings change)."""
+    blob = json.dumps({"config": config.acting_settings(sampler), "steering": STEERING_VERSION}, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
@@ -241,6 +246,7 @@ def plot_anytime(runs: list[dict[str, Any]], refs: dict[str, Any], time_limit: f
                 "paper": {"color": "tab:blue", "lw": 2.0},
                 "soaring": {"color": "black", "lw": 3.0, "zorder": 5},
                 SEEDED_ROW: {"color": "tab:red", "lw": 2.5, "zorder": 6},
+                POLISHED_ROW: {"color": "tab:purple", "lw": 2.0, "zorder": 7},
             }
             kw = style.get(label, {"ls": "--", "lw": 1.5})
             ax.plot(grid, np.where(np.isfinite(med), med, np.nan), label=f"{label} ({len(rs)} runs)", **kw)
@@ -291,7 +297,7 @@ def main(argv: list[str] | None = None) -> int:
         plan = [
             (row, "paper", seed)
             for row in cfgs
-            for seed in range(args.soaring_seeds if row in ("soaring", SEEDED_ROW) else args.seeds)
+            for seed in range(args.soaring_seeds if row in ("soaring", SEEDED_ROW, POLISHED_ROW) else args.seeds)
         ]
     try:
         refs = {name: load_reference(reference_path(args.reference_dir, name)) for name in scen}
@@ -301,6 +307,8 @@ def main(argv: list[str] | None = None) -> int:
         for row, name, seed in plan:
             if sampler == "primitive" and row in ("soaring without glide mixture", "paper + glide mixture"):
                 continue  # the glide mixture acts on the continuous sampler only: rows equal to others
+            if sampler == "continuous" and row == POLISHED_ROW:
+                continue  # the polish acts on the primitive sampler only: the row equals the seeded one
             cfg = dataclasses.asdict(cfgs[row])  # (every field: the worker rebuilds the configuration)
             jobs.append(
                 {
@@ -310,7 +318,7 @@ def main(argv: list[str] | None = None) -> int:
                     "seed": seed,
                     "time": args.time,
                     "config": cfg,
-                    "settings": settings_digest(cfgs[row]),
+                    "settings": settings_digest(cfgs[row], sampler),
                 }
             )
     runs = run_all(jobs, out, args.workers, not args.no_progress)

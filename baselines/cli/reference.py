@@ -10,7 +10,10 @@ evaluation scenario -- lower bound, direct-flight cost and best plan per action 
 For both action sets a second search is seeded with the plans of deterministic soaring-SST runs
 (``--planner-iterations`` each, seeds 0 ... ``--planner-seeds`` - 1) besides the direct flight's,
 and the cheaper of the two searches is kept, so the reference is never worse than those plans:
-"best known" includes what the planner itself found.
+"best known" includes what the planner itself found. The best plan is then polished by local
+search (``--polish``: every edit of up to that many consecutive controls, repeated while one
+helps; depth 1 for the continuous action set); files computed without it are polished, not
+recomputed.
 
 Writes one JSON per scenario to ``results/reference/<name>.json`` (atomically, as soon as it is
 done; a rerun resumes and recomputes only files whose settings differ), ``table.md`` and
@@ -43,6 +46,9 @@ PLANNER_ITERATIONS = 300_000
 #: Planner runs (seeds 0 ... 3) whose plans all seed that search: SST's plan varies much with its
 #: seed (primitive, ``random-10002``: 1,070 / 787 / 972 / 1,070 J/kg for seeds 0-3, the beam 943).
 PLANNER_SEEDS = 4
+#: Depth of the local search that ends the reference (ReferenceConfig.polish): the beam's cell
+#: merging leaves plans that are not locally optimal.
+POLISH = 2
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -65,6 +71,13 @@ def main(argv: list[str] | None = None) -> int:
         default=PLANNER_SEEDS,
         help=f"planner runs (seeds 0, 1, ...) whose plans seed that second search (default {PLANNER_SEEDS})",
     )
+    p.add_argument(
+        "--polish",
+        type=int,
+        default=POLISH,
+        help=f"polish the best plan by edits of up to this many consecutive controls (0: none; the "
+        f"continuous action set at most 1; default {POLISH})",
+    )
     add_backend_args(p, "one per CPU core")
     p.add_argument("--out", type=Path, default=Path("results/reference"), help="output directory")
     p.add_argument("--fresh", action="store_true", help="recompute finished scenarios too")
@@ -77,7 +90,10 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"--planner-iterations={args.planner_iterations} must be >= 0")
     try:
         cfg = ReferenceConfig(
-            beam_width=args.beam_width, planner_iterations=args.planner_iterations, planner_seeds=args.planner_seeds
+            beam_width=args.beam_width,
+            planner_iterations=args.planner_iterations,
+            planner_seeds=args.planner_seeds,
+            polish=args.polish,
         )
         if args.convergence:
             return _convergence(cfg, args.samplers, args.out)
@@ -144,13 +160,14 @@ def _convergence(cfg: ReferenceConfig, samplers: list[str], out: Path) -> int:
                     "rollouts": sr.rollouts,
                     "planner_iterations": c.planner_iterations,
                     "planner_seeds": c.planner_seeds,
+                    "polish": sr.settings.get("polish", 0),
                 }
             )
             print(f"  {s}: best {sr.best_cost:,.0f} J/kg, direct {sr.direct_cost:,.0f}, {sr.seconds:.0f} s", flush=True)
     rows = kept + rows
     lines = [
-        "| action set | beam width | planner seeds | best [J/kg] | change vs half the width [% of direct - bound] "
-        "| direct [J/kg] | lower bound [J/kg] | rollouts | time [s] |",
+        "| action set | beam width | planner seeds, polish | best [J/kg] "
+        "| change vs half the width [% of direct - bound] | direct [J/kg] | lower bound [J/kg] | rollouts | time [s] |",
         "|---|---:|---|---:|---:|---:|---:|---:|---:|",
     ]
     for s in SAMPLERS:
@@ -158,6 +175,8 @@ def _convergence(cfg: ReferenceConfig, samplers: list[str], out: Path) -> int:
         for r in (x for x in rows if x["sampler"] == s):
             n_it = int(r.get("planner_iterations", 0))  # rows from before the field: the beam alone
             plan = f"{int(r.get('planner_seeds', 1))} x {n_it:,} it." if n_it else "none"
+            if r.get("polish", 0):
+                plan += f", polish {r['polish']}"
             span = r["direct_cost"] - r["lower_bound"]
             ch = "—" if prev is None else f"{100 * (r['best_cost'] - prev) / span:+.1f}"
             lines.append(

@@ -6,6 +6,7 @@ interrupted run resumes), and the markdown table built from those files.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -21,17 +22,27 @@ from baselines.reference.yardstick import (
     ScenarioReference,
     compute_reference,
     load_reference,
+    polish_reference,
     reference_path,
     sampler_config,
     save_reference,
 )
 from baselines.sst.soaring import SAMPLERS
 from soaring_env._validation import ConfigError
+from soaring_env.model import SoaringModel
 from soaring_env.scenario import Scenario
 
 
-def _job(args: tuple[dict[str, Any], tuple[str, ...], dict[str, Any], str | None, list[Any]]) -> ScenarioReference:
-    sc_dict, samplers, cfg_dict, env_id, prefix = args
+def _job(
+    args: tuple[dict[str, Any], tuple[str, ...], dict[str, Any], str | None, list[Any], dict[str, Any] | None],
+) -> ScenarioReference:
+    sc_dict, samplers, cfg_dict, env_id, prefix, stored = args
+    if stored is not None:  # a finished reference that only lacks the polish
+        old = ScenarioReference.from_dict(stored)
+        model = SoaringModel(scenario=old.scenario)
+        cfg = ReferenceConfig(**cfg_dict)
+        pol = {s: polish_reference(model, s, old.samplers[s], sampler_config(cfg, s).polish) for s in samplers}
+        return dataclasses.replace(old, samplers={**old.samplers, **pol})
     if env_id is not None:  # a task's own search (its control set, battery and time limit)
         sc = Scenario.from_dict(sc_dict)
         width, tw, floor = int(cfg_dict["beam_width"]), float(cfg_dict["time_weight"]), float(cfg_dict["min_height"])
@@ -48,16 +59,27 @@ def _save(ref: ScenarioReference, path: Path) -> None:
     save_reference(ref, path)
 
 
-def _is_current(path: Path, scenario: Scenario, samplers: Sequence[str], cfg: ReferenceConfig) -> bool:
-    """A finished file for the same scenario, samplers and settings (corrupt files raise, naming it)."""
+def _status(path: Path, scenario: Scenario, samplers: Sequence[str], cfg: ReferenceConfig) -> str:
+    """``"done"``: a finished file for the same scenario, samplers and settings; ``"polish"``: one
+    that differs from them only in being polished less deep (it is polished, not recomputed: the
+    search before the polish is deterministic); ``"todo"`` otherwise (corrupt files raise, naming it)."""
     if not path.exists():
-        return False
+        return "todo"
     ref = load_reference(path)
-    # settings read back through ReferenceConfig: a file from before a new field holds its default
-    return ref.scenario == scenario and all(
-        s in ref.samplers and ReferenceConfig(**ref.samplers[s].settings).to_dict() == sampler_config(cfg, s).to_dict()
-        for s in samplers
-    )
+    if ref.scenario != scenario:
+        return "todo"
+    status = "done"
+    for s in samplers:
+        if s not in ref.samplers:
+            return "todo"
+        # settings read back through ReferenceConfig: a file from before a new field holds its default
+        have, want = ReferenceConfig(**ref.samplers[s].settings), sampler_config(cfg, s)
+        if have.to_dict() == want.to_dict():
+            continue
+        if dataclasses.replace(have, polish=want.polish).to_dict() != want.to_dict() or have.polish > want.polish:
+            return "todo"
+        status = "polish"
+    return status
 
 
 def run_references(
@@ -103,7 +125,12 @@ def run_references(
         raise ConfigError(f"scenario names must be distinct (they name the files); got {names!r}")
     out = Path(out_dir)
     with DirLock(out, "reference run"):  # refuses a file; creates the folder
-        todo = [s for s in scenarios if fresh or not _is_current(reference_path(out, s.name), s, samplers, cfg)]
+        status = {
+            s.name: "todo" if fresh else _status(reference_path(out, s.name), s, samplers, cfg) for s in scenarios
+        }
+        if env_id is not None:  # a task's reference is never polished: its files are either done or not
+            status = {k: "done" if v == "done" else "todo" for k, v in status.items()}
+        todo = [s for s in scenarios if status[s.name] != "done"]
         done = len(scenarios) - len(todo)
         if done and progress:
             print(f"resuming: {done} of {len(scenarios)} scenarios already done in {out}", flush=True)
@@ -119,6 +146,7 @@ def run_references(
                     cfg.to_dict(),
                     env_id,
                     [np.asarray(a).tolist() for a in pre.get(s.name, ())],
+                    load_reference(reference_path(out, s.name)).to_dict() if status[s.name] == "polish" else None,
                 )
                 for s in todo
             ]

@@ -8,7 +8,8 @@ Per scenario and action set (``"primitive"``: the 174 primitives; ``"continuous"
 * ``best_cost`` -- the best plan known in the real field: the reference search seeded with the
   direct plan (so it never does worse than flying that plan through the thermals), and with
   ``planner_iterations`` the cheaper of that and a second search seeded with the plans of
-  ``planner_seeds`` soaring-planner runs too (never worse than any of those plans).
+  ``planner_seeds`` soaring-planner runs too (never worse than any of those plans); with
+  ``polish``, that plan then polished by local search (:mod:`baselines.reference.polish`).
 
 Regret: :func:`~baselines.reference.bounds.regret` against ``best_cost`` and ``direct_cost``.
 """
@@ -26,11 +27,12 @@ from typing import Any
 
 import numpy as np
 
-from baselines.reference.beam import ReferenceConfig, search
+from baselines.reference.beam import MAX_POLISH_DEPTH, ReferenceConfig, search
 from baselines.reference.bounds import MIN_GAP, lower_bound, regret, without_thermals
+from baselines.reference.polish import polish
 from baselines.sst.planner import plan_soaring
 from baselines.sst.soaring import SAMPLERS
-from soaring_env._validation import ConfigError, check_choice
+from soaring_env._validation import ConfigError, check_choice, check_int
 from soaring_env.model import SoaringModel
 from soaring_env.scenario import Scenario, atomic_write_text
 
@@ -188,24 +190,54 @@ def compute_reference(
                 rollouts += alt.rollouts
                 if alt.cost < best.cost:
                     best = alt
-        out[sampler] = SamplerReference(
+        ref = SamplerReference(
             best_cost=best.cost,
             direct_cost=direct.cost,
             actions=best.plan.to_dict()["actions"],
             direct_actions=direct.plan.to_dict()["actions"],
             flight_time=best.plan.flight_time,
-            settings=cfg_s.to_dict(),
+            settings=dataclasses.replace(cfg_s, polish=0).to_dict(),
             rollouts=rollouts,
             seconds=time.perf_counter() - t0,
         )
+        out[sampler] = polish_reference(model, sampler, ref, cfg_s.polish)
     return ScenarioReference(scenario=scenario, lower_bound=lower_bound(model), samplers=out)
+
+
+def polish_reference(model: SoaringModel, sampler: str, ref: SamplerReference, depth: int) -> SamplerReference:
+    """``ref`` with its best plan polished to ``depth`` (:func:`~baselines.reference.polish.polish`;
+    0 or a plan already polished that deep: ``ref`` unchanged). The last step of
+    :func:`compute_reference`, and how a stored reference computed without it is brought up to
+    date (the same result: the search before it is deterministic). Its rollouts and seconds are
+    added to the reference's."""
+    check_int("depth", depth, 0, MAX_POLISH_DEPTH)
+    cfg = ReferenceConfig(**ref.settings)
+    if depth <= cfg.polish or not ref.actions:
+        return ref
+    t0 = time.perf_counter()
+    cfg = dataclasses.replace(cfg, polish=depth)
+    width = 1 if sampler == "primitive" else 3
+    res = polish(model, sampler, np.asarray(ref.actions, np.float64).reshape(-1, width), cfg)
+    return dataclasses.replace(
+        ref,
+        best_cost=res.cost,
+        actions=res.plan.to_dict()["actions"],
+        flight_time=res.plan.flight_time,
+        settings=cfg.to_dict(),
+        rollouts=ref.rollouts + res.rollouts,
+        seconds=ref.seconds + time.perf_counter() - t0,
+    )
 
 
 def sampler_config(cfg: ReferenceConfig, sampler: str) -> ReferenceConfig:
     """The settings the search of one action set runs with (and its file records): the same for
     both action sets (a continuous planner plan's controls join the beam's control set for that
-    search, see :func:`~baselines.reference.beam.search`)."""
+    search, see :func:`~baselines.reference.beam.search`), except that the continuous plans are
+    polished to depth 1 at most: a depth-2 move there tries every pair of the ~400 controls at
+    every position (~160,000 edited plans each, ~25x the primitives')."""
     check_choice("sampler", sampler, SAMPLERS)
+    if sampler == "continuous" and cfg.polish > 1:
+        return dataclasses.replace(cfg, polish=1)
     return cfg
 
 
@@ -221,6 +253,7 @@ __all__ = [
     "compute_reference",
     "load_reference",
     "load_references",
+    "polish_reference",
     "reference_path",
     "save_reference",
 ]

@@ -41,7 +41,11 @@ class SeededSST(SST):
     at once and the search ends: with budgets too short for any beam the planner is plain SST
     after a few depths' detour); each beam is seeded with the tree's best plan (its controls join the
     continuous control grid), so it keeps that plan's nodes at every depth and can only improve on
-    it, and (c) its plan is inserted into the tree at once (:meth:`SST.insert_path`); (d) the rest
+    it, and (c) its plan is inserted into the tree at once (:meth:`SST.insert_path`); with
+    ``seed_polish`` and the primitive sampler, the beams get ``seed_share - seed_polish_share``
+    of the budget and then the tree's best plan is polished by local search
+    (:func:`baselines.reference.polish.polish`, as the reference is) in what is left of
+    ``seed_share``, and inserted likewise; (d) the rest
     of the budget goes to SST as usual: the refinements perturb the inserted plan edge by edge, and the
     random expansions go on, so SST's probabilistic completeness and asymptotic near-optimality are
     kept (the seed only adds nodes). The search's time and edges count in ``stats`` (``elapsed``,
@@ -55,7 +59,8 @@ class SeededSST(SST):
         super().__init__(problem, params, seed)
         self.soaring_problem = problem
         self.seeded = False
-        #: the seeding searches run: (beam width, cost found [J/kg] (inf: none), edges flown, seconds)
+        #: the seeding searches run: (beam width (0: the polish), cost found [J/kg] (inf: none),
+        #: edges flown, seconds)
         self.seed_searches: list[tuple[int, float, int, float]] = []
 
     def run(
@@ -69,6 +74,7 @@ class SeededSST(SST):
         if self.seeded:
             return super().run(time_limit, max_iterations, callback=callback)
         from baselines.reference.beam import ReferenceConfig, search  # (the layer above: see the module)
+        from baselines.reference.polish import polish
 
         t_lim, n_lim = check_budget(time_limit, max_iterations)
         self.seeded = True
@@ -93,12 +99,21 @@ class SeededSST(SST):
         root = p.root_state()
         vp = float(root[S_V])
         max_edges = self.params.max_depth or ReferenceConfig().max_edges
+        # the planner's start, as the searches take it
+        here: dict[str, Any] = {
+            "start": root[[S_N, S_E, S_CHI, S_H]],
+            "t0": float(root[S_T]),
+            "airspeed_prev": None if math.isnan(vp) else vp,
+        }
         seed_n = 0
         last_s = last_n = 0.0
         last_w = 1
+        # the polish is for the primitive sampler only (see SoaringSSTConfig.seed_polish)
+        polish_depth = cfg.seed_polish if p.kind == "primitive" else 0
+        beam_share = cfg.seed_share - (cfg.seed_polish_share if polish_depth else 0.0)
         for width in seed_widths(cfg):
-            share_t = None if t_lim is None else cfg.seed_share * t_lim - (time.perf_counter() - t_start)
-            share_n = None if n_lim is None else int(cfg.seed_share * n_lim) - used_n - seed_n
+            share_t = None if t_lim is None else beam_share * t_lim - (time.perf_counter() - t_start)
+            share_n = None if n_lim is None else int(beam_share * n_lim) - used_n - seed_n
             grow = width / last_w  # (a beam's time and edges grow about as its width)
             if (share_t is not None and share_t <= grow * last_s) or (share_n is not None and share_n <= grow * last_n):
                 break
@@ -110,25 +125,45 @@ class SeededSST(SST):
                     beam_width=width, start_width=width, max_edges=max_edges, progress_weight=cfg.seed_progress_weight
                 ),
                 seed_controls=[best.controls] if best.solved else [],
-                start=root[[S_N, S_E, S_CHI, S_H]],
-                t0=float(root[S_T]),
-                airspeed_prev=None if math.isnan(vp) else vp,
+                **here,
                 time_limit=share_t,
                 max_rollouts=share_n,
             )
             seed_n += found.rollouts
             last_s, last_n, last_w = found.seconds, float(found.rollouts), width
-            self.insert_path(found.plan.controls(), seconds=found.seconds, edges=found.rollouts)
-            self.seed_searches.append((width, found.cost, found.rollouts, found.seconds))
-            if callback is not None:
-                callback(self.stats)
+            self._record(width, found, callback)
             if found.stopped:
                 break  # (a beam the budget stopped gave its time back: SST has it)
+        # (c) the polish of the tree's best plan, in what is left of the seeding share
+        best = self.result()
+        share_t = None if t_lim is None else cfg.seed_share * t_lim - (time.perf_counter() - t_start)
+        share_n = None if n_lim is None else int(cfg.seed_share * n_lim) - used_n - seed_n
+        if polish_depth and best.solved and (share_t is None or share_t > 0.0) and (share_n is None or share_n > 0):
+            pol = polish(
+                p.model,
+                p.kind,
+                best.controls,
+                ReferenceConfig(max_edges=max_edges),
+                depth=polish_depth,
+                **here,
+                time_limit=share_t,
+                max_rollouts=share_n,
+            )
+            seed_n += pol.rollouts
+            self._record(0, pol, callback)
         rest_t = None if t_lim is None else t_lim - (time.perf_counter() - t_start)
         rest_n = None if n_lim is None else n_lim - used_n - seed_n
         if (rest_t is not None and rest_t <= 0.0) or (rest_n is not None and rest_n <= 0):
             return self.result()
         return super().run(rest_t, rest_n, callback=callback)
+
+    def _record(self, width: int, found: Any, callback: Callable[[SSTStats], None] | None) -> None:
+        """Insert a seeding search's plan into the tree (if cheaper: :meth:`SST.insert_path`) and
+        record the search (``width`` 0: the polish)."""
+        self.insert_path(found.plan.controls(), seconds=found.seconds, edges=found.rollouts)
+        self.seed_searches.append((width, found.cost, found.rollouts, found.seconds))
+        if callback is not None:
+            callback(self.stats)
 
 
 def seed_widths(config: SoaringSSTConfig) -> list[int]:
