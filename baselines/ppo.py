@@ -45,7 +45,7 @@ import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -116,6 +116,9 @@ class TrainConfig:
     :param body_frame: observe through :class:`BodyFrameObservation` (goal, wind and thermal offsets
         in the aircraft's frame, plus goal distance and bearing): the policy need not learn rotations.
         None (default): on (:class:`BodyFrame` finds the pairs of any task's layout by name).
+    :param final_glide: append the :class:`FinalGlide` margin to the body-frame observation (the
+        height left over the goal after the flattest zero-thrust glide to it in the wind): when to
+        leave a thermal becomes a threshold on one input. Goal tasks only; default off.
     :param turn_exponent: continuous only: the policy's turn channel is mapped through
         :class:`TurnCurveAction` (``sign(u) |u|^p``) for fine steering; 1 switches it off.
     :param env_kwargs: keyword arguments for ``gym.make`` (config fields of the env); the scenario
@@ -136,8 +139,10 @@ class TrainConfig:
     :param demo_match: with ``demos``: only the files whose scenario name matches this regular
         expression as a whole (e.g. the base plans and one DAgger round of a folder that holds more
         rounds: ``xc-20([01]\\d\\d|2[0-3]\\d)(-f1s\\d+)?``). None (default): every file.
-    :param demo_mirror: continuous and grid: clone the mirror images of the plans too (east ->
-        -east, every turn reversed; :func:`baselines.imitation.with_mirror_images`).
+    :param demo_mirror: clone the mirror images of the plans too (east -> -east, every turn
+        reversed: the turn channel, the grid's mirrored row or the mirrored primitive,
+        :meth:`~soaring_env.primitives.PrimitiveLibrary.mirror_indices`;
+        :func:`baselines.imitation.with_mirror_images`).
     :param demo_visit_weight: the weight of each DAgger plan's first row, the state the policy
         visited, in the cloning (:func:`baselines.imitation.demonstrations`; e.g. the round's
         ``--every``). 1 (default): every row alike.
@@ -177,6 +182,7 @@ class TrainConfig:
     log_std_init: float = -0.5
     shaping: float = 0.0
     body_frame: bool | None = None
+    final_glide: bool = False
     turn_exponent: float = 3.0
     env_kwargs: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     init_from: str | None = None
@@ -203,6 +209,10 @@ class TrainConfig:
             raise ValueError("algo='grid' needs a goal task (goal or xc): its controls are the goal search's")
         if self.body_frame is None:
             object.__setattr__(self, "body_frame", True)
+        if not isinstance(self.final_glide, bool):
+            raise ValueError(f"final_glide={self.final_glide!r} must be true or false")
+        if self.final_glide and (not self.body_frame or self.task == "climb"):
+            raise ValueError("final_glide needs body_frame=True and a task with a goal (goal or xc)")
         if self.vec_env not in VEC_ENVS:
             raise ValueError(f"vec_env={self.vec_env!r} is unknown; known: {', '.join(VEC_ENVS)}")
         if self.vec_env == "native" and self.shaping:
@@ -353,6 +363,76 @@ def body_frame(obs: np.ndarray, n_base: int = 11, n_thermal_features: int = 5) -
 _MIRROR_INVARIANT = frozenset({"cos_course", "height", "updraft", "edge_lift", "airspeed", "battery", "time_left"})
 
 
+@dataclass(frozen=True)
+class FinalGlide:
+    """The final-glide margin, what a glider pilot's final-glide computer shows: the height [m]
+    the aircraft would have left over the goal centre after the flattest straight zero-thrust glide
+    to it in the observed wind (negative: it cannot glide there). It turns "when to leave a
+    thermal" into a threshold on one number, where a policy would otherwise have to learn the
+    product of distance, polar and wind.
+
+    Built by :meth:`of` from an env's aircraft, envelope and observation scales; picklable.
+
+    :param airspeeds: airspeeds of the straight glides considered [m/s].
+    :param angles: their zero-thrust path angles [rad] (< 0).
+    :param position_scale: the env's horizontal distance scale [m]; :param height_scale: height
+        scale [m]; :param wind_scale: horizontal wind scale [m/s] (the observation's units).
+    """
+
+    airspeeds: tuple[float, ...]
+    angles: tuple[float, ...]
+    position_scale: float
+    height_scale: float
+    wind_scale: float
+
+    #: The margin's bound in height units (clipped, as every observation entry).
+    BOUND = 3.0
+
+    @classmethod
+    def of(cls, env: Any) -> FinalGlide:
+        """From a goal env (unwrapped or not): 21 airspeeds across its envelope, the zero-thrust
+        angles that hold up to the domain's ceiling (:meth:`Aircraft.glide_angle`)."""
+        u = env.unwrapped
+        model, cfg = u.model, u.config
+        speeds = np.linspace(float(model.control_low[0]), float(model.control_high[0]), 21)
+        angles = model.aircraft.glide_angle(speeds, 0.0, model.scenario.bounds.height_max)
+        return cls(
+            tuple(float(v) for v in speeds),
+            tuple(float(g) for g in angles),
+            float(cfg.position_scale),
+            float(cfg.height_scale),
+            float(cfg.wind_scale),
+        )
+
+    def margin(
+        self,
+        goal_north: np.ndarray,
+        goal_east: np.ndarray,
+        goal_up: np.ndarray,
+        wind_north: np.ndarray,
+        wind_east: np.ndarray,
+    ) -> np.ndarray:
+        """The margin in height units, clipped to +-:attr:`BOUND`, from the raw (scaled) observation
+        entries (arrays of one shape). The glide flies the goal's bearing, crabbing into the
+        crosswind; an airspeed whose ground speed is not positive is skipped."""
+        v = np.asarray(self.airspeeds)[None, :]
+        g = np.asarray(self.angles)[None, :]
+        gn, ge = goal_north.ravel() * self.position_scale, goal_east.ravel() * self.position_scale
+        d = np.hypot(gn, ge)
+        safe = np.where(d > 1e-9, d, 1.0)
+        un, ue = np.where(d > 1e-9, gn / safe, 1.0), np.where(d > 1e-9, ge / safe, 0.0)
+        wn, we = wind_north.ravel() * self.wind_scale, wind_east.ravel() * self.wind_scale
+        along, cross = wn * un + we * ue, -wn * ue + we * un
+        va = v * np.cos(g)  # horizontal airspeed
+        ground = np.sqrt(np.maximum(va**2 - cross[:, None] ** 2, 0.0)) + along[:, None]
+        ok = ground > 0.1
+        loss = np.where(ok, d[:, None] * (-v * np.sin(g)) / np.where(ok, ground, 1.0), np.inf).min(axis=1)
+        above = -goal_up.ravel() * self.height_scale  # height over the goal centre [m]
+        reach = np.isfinite(loss)
+        m = np.where(reach, (above - np.where(reach, loss, 0.0)) / self.height_scale, -self.BOUND)
+        return np.clip(m, -self.BOUND, self.BOUND).reshape(np.shape(goal_north))
+
+
 class BodyFrame:
     """:func:`body_frame` for any observation layout, found by the entries' names (``sin_course``,
     ``cos_course`` and every ``*_north`` / ``*_east`` pair: goal, wind, thermal slots); the goal's
@@ -360,15 +440,29 @@ class BodyFrame:
     layout it computes exactly :func:`body_frame`. Picklable (it holds only indices).
 
     :param names: the env's ``observation_names``.
+    :param glide: also append the :class:`FinalGlide` margin (a goal layout only); None: not.
     """
 
-    def __init__(self, names: Sequence[str]) -> None:
+    def __init__(self, names: Sequence[str], glide: FinalGlide | None = None) -> None:
         names = list(names)
         where = {n: i for i, n in enumerate(names)}
         self.course = (where["sin_course"], where["cos_course"])
         self.pairs = [(i, where[n[: -len("north")] + "east"]) for i, n in enumerate(names) if n.endswith("_north")]
         self.goal = (where["goal_north"], where["goal_east"]) if "goal_north" in where else None
         self.size = len(names)
+        if glide is not None and self.goal is None:
+            raise ConfigError("final_glide needs a task with a goal (goal reaching or cross-country)")
+        self.glide = glide
+        self._glide_inputs = (
+            tuple(where[n] for n in ("goal_north", "goal_east", "goal_up", "wind_north", "wind_east"))
+            if glide is not None
+            else ()
+        )
+
+    @property
+    def n_extra(self) -> int:
+        """Entries appended to the observation (goal distance and bearing, the final-glide margin)."""
+        return (3 if self.goal is not None else 0) + (1 if self.glide is not None else 0)
 
     def __call__(self, obs: Any) -> np.ndarray:
         o = np.asarray(obs, dtype=np.float32)
@@ -393,6 +487,8 @@ class BodyFrame:
                     axis=1,
                 )
             )
+        if self.glide is not None:
+            parts.append(self.glide.margin(*(x[:, i] for i in self._glide_inputs))[:, None])
         res = np.concatenate(parts, axis=1).astype(np.float32)
         return res.reshape(*o.shape[:-1], res.shape[-1])
 
@@ -406,7 +502,7 @@ class BodyFrame:
         :raises ConfigError: an entry whose mirror image is not known (e.g. the sensed tiers).
         """
         names = list(names)
-        out = np.ones(self.size + (3 if self.goal is not None else 0), np.float32)
+        out = np.ones(self.size + self.n_extra, np.float32)  # the glide margin is mirror-invariant
         flips = {k for _, k in self.pairs} | {self.course[0]}
         for i, n in enumerate(names):
             if i in flips:
@@ -429,17 +525,30 @@ class BodyFrame:
             r = float(np.hypot(space.high[self.goal[0]], space.high[self.goal[1]]))  # |(n, e)| at most
             low = np.concatenate([low, [0.0, -1.0, -1.0]])
             high = np.concatenate([high, [r, 1.0, 1.0]])
+        if self.glide is not None:
+            low = np.concatenate([low, [-FinalGlide.BOUND]])
+            high = np.concatenate([high, [FinalGlide.BOUND]])
         return gym.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
 
 
-class BodyFrameObservation(gym.ObservationWrapper):
-    """Observation wrapper applying :class:`BodyFrame` of the env's layout; bounds widen accordingly."""
+def policy_frame(env: Any, final_glide: bool = False) -> BodyFrame:
+    """The :class:`BodyFrame` of ``env``'s layout (a single env, wrapped or not, or a batched env's
+    template), with the :class:`FinalGlide` margin where ``final_glide``."""
+    u = env.unwrapped if hasattr(env, "unwrapped") else env
+    return BodyFrame(u.observation_names, FinalGlide.of(u) if final_glide else None)
 
-    def __init__(self, env: gym.Env) -> None:
+
+class BodyFrameObservation(gym.ObservationWrapper):
+    """Observation wrapper applying :class:`BodyFrame` of the env's layout; bounds widen accordingly.
+
+    :param final_glide: append the :class:`FinalGlide` margin.
+    """
+
+    def __init__(self, env: gym.Env, final_glide: bool = False) -> None:
         super().__init__(env)
         space = env.observation_space
         assert isinstance(space, gym.spaces.Box)
-        self.transform = BodyFrame(cast(Any, env.unwrapped).observation_names)
+        self.transform = policy_frame(env, final_glide)
         self.observation_space = self.transform.space(space)
 
     def observation(self, observation: np.ndarray) -> np.ndarray:
@@ -576,9 +685,11 @@ def make_train_env(
     body_frame: bool = True,
     turn_exponent: float = 1.0,
     grid: bool = False,
+    final_glide: bool = False,
 ) -> gym.Env:
     """One training env: random scenario at every reset, optional extra goal shaping and
-    body-frame observations (``grid``: :class:`ControlGridAction`; else the turn curve).
+    body-frame observations (``grid``: :class:`ControlGridAction`; else the turn curve;
+    ``final_glide``: the :class:`FinalGlide` margin appended).
 
     Module-level (picklable) so that ``SubprocVecEnv`` workers can build it.
     """
@@ -587,12 +698,16 @@ def make_train_env(
     env = gym.make(_module_qualified(env_id), scenario="random", **dict(env_kwargs or {}))
     if shaping:
         env = GoalDistanceShaping(env, weight=shaping, gamma=gamma)
-    return _wrap_policy_io(env, body_frame, turn_exponent, grid)
+    return _wrap_policy_io(env, body_frame, turn_exponent, grid, final_glide)
 
 
-def _wrap_policy_io(env: gym.Env, body_frame: bool, turn_exponent: float, grid: bool) -> gym.Env:
+def _wrap_policy_io(
+    env: gym.Env, body_frame: bool, turn_exponent: float, grid: bool, final_glide: bool = False
+) -> gym.Env:
+    if final_glide and not body_frame:
+        raise ValueError("final_glide needs body_frame=True (the margin is appended to the aircraft-frame observation)")
     if body_frame:
-        env = BodyFrameObservation(env)
+        env = BodyFrameObservation(env, final_glide)
     if grid:
         env = ControlGridAction(env)
     elif turn_exponent != 1.0 and isinstance(env.action_space, gym.spaces.Box):
@@ -607,6 +722,7 @@ def make_native_train_env(
     body_frame: bool = True,
     turn_exponent: float = 1.0,
     grid: bool = False,
+    final_glide: bool = False,
 ) -> Any:
     """``n_envs`` training envs as one natively batched SB3 ``VecEnv`` (random scenario at every
     reset), with SB3's ``VecMonitor`` episode statistics and the same body-frame observations and
@@ -617,7 +733,9 @@ def make_native_train_env(
     from soaring_env.env.sb3 import SoaringSB3VecEnv
 
     venv: Any = SoaringSB3VecEnv(n_envs, env_id=env_id, scenario="random", **dict(env_kwargs or {}))
-    obs_fn = BodyFrame(venv.venv.template.observation_names) if body_frame else None
+    if final_glide and not body_frame:
+        raise ValueError("final_glide needs body_frame=True (the margin is appended to the aircraft-frame observation)")
+    obs_fn = policy_frame(venv.venv.template, final_glide) if body_frame else None
     act_fn: Callable[[np.ndarray], np.ndarray] | None = None
     act_space = None
     if grid:
@@ -668,12 +786,13 @@ def make_eval_env(
     body_frame: bool = True,
     turn_exponent: float = 1.0,
     grid: bool = False,
+    final_glide: bool = False,
 ) -> gym.Env:
     """One validation env cycling through ``scenarios`` (env reward only, no extra shaping)."""
     import soaring_env  # noqa: F401
 
     env: gym.Env = ScenarioCycle(gym.make(_module_qualified(env_id), **dict(env_kwargs or {})), scenarios)
-    return _wrap_policy_io(env, body_frame, turn_exponent, grid)
+    return _wrap_policy_io(env, body_frame, turn_exponent, grid, final_glide)
 
 
 def observation_transform(run_record: Mapping[str, Any]) -> Callable[[Any], Any] | None:
@@ -685,6 +804,11 @@ def observation_transform(run_record: Mapping[str, Any]) -> Callable[[Any], Any]
     cfg = run_record.get("config", run_record)
     if not cfg.get("body_frame", False):
         return None
+    if cfg.get("final_glide", False):
+        import soaring_env  # noqa: F401  (registers the ids)
+
+        env_kwargs = {k: v for k, v in dict(cfg.get("env_kwargs", {})).items() if k != "scenario"}
+        return policy_frame(gym.make(_module_qualified(run_record.get("env_id", CONTINUOUS_ID)), **env_kwargs), True)
     names = run_record.get("observation_names")
     return body_frame if names is None else BodyFrame(names)  # runs saved before the tasks: goal layout
 
@@ -940,21 +1064,26 @@ def _clone_demos(model: Any, config: TrainConfig, out: Path) -> tuple[dict[str, 
         mirror_action = lambda a: mirror_row[a]  # noqa: E731
     elif config.algo == "continuous" and p != 1.0:
         to_policy_action = lambda a: inverse_turn_curve(a, p)  # noqa: E731  (odd in the turn: mirrors as is)
+    elif config.algo not in CONTINUOUS_ALGOS:
+        mirror_prim = probe.library.mirror_indices()
+        mirror_action = lambda a: mirror_prim[a]  # noqa: E731
     plans = demonstrations(
         str(config.demos),
-        lambda sc: make_eval_env(config.env_id, [sc], config.env_kwargs, bool(config.body_frame), p, grid),
+        lambda sc: make_eval_env(
+            config.env_id, [sc], config.env_kwargs, bool(config.body_frame), p, grid, config.final_glide
+        ),
         sampler="continuous" if config.algo in CONTINUOUS_ALGOS else "primitive",
         gamma=config.gamma,
         to_policy_action=to_policy_action,
         match=config.demo_match,
         visit_weight=float(config.demo_visit_weight),
     )
-    mirrored = bool(config.demo_mirror and config.algo in CONTINUOUS_ALGOS)
+    mirrored = bool(config.demo_mirror)
     demos = plans
     if mirrored:
         if not config.body_frame:
             raise ValueError("demo_mirror needs body_frame=True (the mirror image is taken in the aircraft's frame)")
-        signs = BodyFrame(probe.observation_names).mirror_signs(probe.observation_names)
+        signs = policy_frame(probe, config.final_glide).mirror_signs(probe.observation_names)
         demos = with_mirror_images(plans, signs, mirror_action)
     torch.manual_seed(config.seed)
     losses: list[dict[str, float]] = []
@@ -1027,7 +1156,13 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
         train_env: Any
         if config.vec_env == "native":
             train_env = make_native_train_env(
-                config.env_id, config.n_envs, config.env_kwargs, bool(config.body_frame), config.turn_exponent, grid
+                config.env_id,
+                config.n_envs,
+                config.env_kwargs,
+                bool(config.body_frame),
+                config.turn_exponent,
+                grid,
+                config.final_glide,
             )
             train_env.seed(config.seed)  # as make_vec_env seeds: env i resets with seed + i
         else:
@@ -1044,6 +1179,7 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
                     "body_frame": bool(config.body_frame),
                     "turn_exponent": config.turn_exponent,
                     "grid": grid,
+                    "final_glide": config.final_glide,
                 },
             )
         scenarios = validation_scenarios(
@@ -1053,7 +1189,13 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
             [
                 lambda: Monitor(
                     make_eval_env(
-                        config.env_id, scenarios, config.env_kwargs, bool(config.body_frame), config.turn_exponent, grid
+                        config.env_id,
+                        scenarios,
+                        config.env_kwargs,
+                        bool(config.body_frame),
+                        config.turn_exponent,
+                        grid,
+                        config.final_glide,
                     )
                 )
             ]

@@ -144,6 +144,18 @@ class PrimitiveLibrary:
         """Family code per primitive (0 straight, 1 curve, 2 spiral, 3 spline)."""
         return self.table[:, COL_FAMILY].astype(np.int64)
 
+    def mirror_indices(self) -> np.ndarray:
+        """(174,) int64: the index of each primitive's mirror image (its turn rates negated, the
+        same airspeed and path angle; straight primitives are their own). The model is
+        mirror-symmetric, so a plan flown with every primitive mirrored is a plan of the mirrored
+        world (east -> -east) at the same cost."""
+        rows = self.kernel_rows
+        flipped = rows * np.array([1.0, 1.0, -1.0, -1.0])
+        match = np.all(flipped[:, None, :] == rows[None, :, :], axis=2)
+        if not np.all(match.sum(axis=1) == 1):
+            raise RuntimeError("internal error: the primitive library is not mirror-symmetric")
+        return np.argmax(match, axis=1).astype(np.int64)
+
     def describe(self, index: int) -> str:
         """Human-readable description of primitive ``index``."""
         f, v, g, w1, w2 = self.table[self.check_index(index)]

@@ -6,6 +6,7 @@ import json
 import math
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -220,6 +221,26 @@ def _tiny_run(algo: str, ref_dir: Path, **kwargs: object) -> TrainConfig:
     )
 
 
+@pytest.mark.parametrize(("algo", "kwargs"), [("discrete", {}), ("masked", {}), ("grid", {"final_glide": True})])
+def test_train_with_demos_primitives_and_final_glide(
+    ref_dir: Path, tmp_path: Path, algo: str, kwargs: dict[str, object]
+) -> None:
+    """The primitive policies clone the primitive plans and their mirror images; a grid policy
+    with the final-glide input trains, saves, and its agent flies the env with that input."""
+    from baselines.agents import PPOAgent
+
+    out = train(_tiny_run(algo, ref_dir, demo_epochs=3, **kwargs), tmp_path / algo)
+    record = json.loads((out / "config.json").read_text())
+    bc = record["behaviour_cloning"]
+    assert bc["plans"] == len(SCENARIOS) and bc["mirrored"] and bc["steps"] % 2 == 0
+    agent = PPOAgent(out)
+    env = gym.make(record["env_id"])
+    obs, _ = env.reset(seed=0)
+    agent.reset(env, 0)
+    assert env.action_space.contains(agent.predict(obs)[0])
+    env.close()
+
+
 def test_train_with_demos_saves_the_cloned_start(ref_dir: Path, tmp_path: Path) -> None:
     out = train(_tiny_run("continuous", ref_dir, demo_epochs=5), tmp_path / "run")
     assert (out / "bc_model.zip").is_file() and (out / "model.zip").is_file()
@@ -358,20 +379,34 @@ def test_dagger_round_restricted_to_the_first_steps_and_to_failed_episodes(ref_d
         assert len(got) == kept
 
 
-def test_mirror_images_are_the_plans_of_the_mirrored_scenarios(ref_dir: Path) -> None:
+@pytest.mark.parametrize(("sampler", "env_id"), [("continuous", CONTINUOUS_ID), ("primitive", DISCRETE_ID)])
+def test_mirror_images_are_the_plans_of_the_mirrored_scenarios(ref_dir: Path, sampler: str, env_id: str) -> None:
     """Reversing every turn of a plan in the scenario mirrored east -> -east flies the mirror image:
-    the same rewards, and observations equal to the originals times ``mirror_signs``."""
+    the same rewards, and observations equal to the originals times ``mirror_signs`` (continuous:
+    the turn channel negated; primitives: each primitive's mirror, ``mirror_indices``)."""
     import dataclasses
-
-    import gymnasium as gym
 
     from baselines.imitation import with_mirror_images
     from baselines.ppo import BodyFrame
 
-    names = gym.make(CONTINUOUS_ID).unwrapped.observation_names
+    probe = gym.make(env_id).unwrapped
+    names = probe.observation_names
     signs = BodyFrame(names).mirror_signs(names)
-    demos = demonstrations(ref_dir, _env(CONTINUOUS_ID), sampler="continuous", gamma=0.99)
-    both = with_mirror_images(demos, signs, lambda a: a * np.array([1, -1, 1], np.float32))
+    demos = demonstrations(ref_dir, _env(env_id), sampler=sampler, gamma=0.99)
+    if sampler == "continuous":
+        flip = np.array([1, -1, 1], np.float32)
+
+        def mirror(a: np.ndarray) -> np.ndarray:
+            return a * flip
+    else:
+        mirror_prim = probe.library.mirror_indices()
+        assert np.array_equal(mirror_prim[mirror_prim], np.arange(len(mirror_prim)))  # an involution
+        assert np.all(mirror_prim[:10] == np.arange(10))  # straight primitives are their own mirror
+
+        def mirror(a: np.ndarray) -> np.ndarray:
+            return mirror_prim[a]
+
+    both = with_mirror_images(demos, signs, mirror)
     assert len(both) == 2 * len(demos) and both.scenarios[len(demos.scenarios)] == "tiny-0~mirror"
     refs = {p.stem: json.loads(p.read_text()) for p in sorted(ref_dir.glob("*.json"))}
     for k, sc in enumerate(SCENARIOS):
@@ -385,13 +420,21 @@ def test_mirror_images_are_the_plans_of_the_mirrored_scenarios(ref_dir: Path) ->
             ),
             goal=dataclasses.replace(sc.goal, east=-sc.goal.east),
         )
-        env = _env(CONTINUOUS_ID)(mirrored)
+        env = _env(env_id)(mirrored)
         obs, _ = env.reset(seed=0)
         rows = np.flatnonzero(both.episode == len(demos.scenarios) + k)
-        for j, a in zip(rows, refs[sc.name]["samplers"]["continuous"]["actions"], strict=True):
+        plan = refs[sc.name]["samplers"][sampler]["actions"]
+        ret = 0.0
+        for j, a in zip(rows, plan, strict=True):
             assert np.allclose(obs, both.observations[j], atol=1e-5)
-            assert np.array_equal(both.actions[j], np.asarray(a, np.float32) * np.array([1, -1, 1], np.float32))
-            obs, *_ = env.step(both.actions[j])
+            assert np.array_equal(both.actions[j], mirror(np.asarray(a, both.actions.dtype)))
+            obs, r, *_ = env.step(both.actions[j])
+            ret += float(r)
+        orig = _env(env_id)(sc)
+        orig.reset(seed=0)
+        ret0 = sum(float(orig.step(np.asarray(a, both.actions.dtype))[1]) for a in plan)
+        assert ret == pytest.approx(ret0, rel=1e-9, abs=1e-9)  # the same rewards
+        orig.close()
         env.close()
     with pytest.raises(ConfigError, match="no known mirror image"):
         BodyFrame([*names, "lift_left"]).mirror_signs([*names, "lift_left"])

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from pathlib import Path
 
 import gymnasium as gym
@@ -18,10 +19,12 @@ from baselines.agents import Agent, PPOAgent
 from baselines.evaluation import EvalConfig, resolve_scenario, run_evaluation
 from baselines.ppo import (
     ALGOS,
+    CONTINUOUS_ID,
     DISCRETE_ID,
     TASKS,
     BodyFrame,
     BodyFrameObservation,
+    FinalGlide,
     GoalDistanceShaping,
     ScenarioCycle,
     TrainConfig,
@@ -197,6 +200,65 @@ def test_body_frame_of_any_layout() -> None:
     assert t[names.index("thermal_0_east")] == pytest.approx(-n * s + e * c, abs=1e-6)  # right
     with pytest.raises(ValueError, match="task"):
         TrainConfig(task="soar")
+
+
+def test_final_glide_margin_closed_form_and_wind() -> None:
+    """The margin is the height over the goal centre less distance x the flattest glide's slope in
+    still air (closed form); a headwind or a crosswind lowers it, a tailwind raises it; a wind the
+    aircraft cannot fly against gives the lower bound; it is clipped to +-3 height units."""
+    env = gym.make("soaring/SoaringContinuous-v0")
+    fg = FinalGlide.of(env)
+    slope = math.tan(-max(fg.angles))  # the flattest glide's height lost per metre
+    assert 0.03 < slope < 0.1  # L/D between 10 and 33
+    one = np.ones(1)
+
+    def m(n: float, e: float, up: float, wn: float = 0.0, we: float = 0.0) -> float:
+        return float(fg.margin(n * one, e * one, up * one, wn * one, we * one)[0])
+
+    # 2 km north, 100 m above the goal centre, no wind (positions in km, wind in units of 10 m/s)
+    assert m(2.0, 0.0, -0.1) == pytest.approx((100.0 - 2000.0 * slope) / 1000.0, rel=1e-12)
+    assert m(0.0, 0.0, -0.1) == pytest.approx(0.1)  # at the goal: the height over it
+    assert m(-1.4, 1.4, -0.1) == pytest.approx((100.0 - 1979.898987 * slope) / 1000.0, rel=1e-6)  # bearing
+    still = m(2.0, 0.0, -0.1)
+    assert m(2.0, 0.0, -0.1, wn=-0.5) < still < m(2.0, 0.0, -0.1, wn=0.5)  # head- and tailwind
+    assert m(2.0, 0.0, -0.1, we=0.5) < still and m(2.0, 0.0, -0.1, we=0.5) == pytest.approx(m(2.0, 0.0, -0.1, we=-0.5))
+    assert m(2.0, 0.0, -0.1, wn=-4.0) == -FinalGlide.BOUND  # 40 m/s headwind: no glide gets there
+    assert m(0.0, 0.0, -3.0) == FinalGlide.BOUND
+
+
+def test_final_glide_in_the_body_frame() -> None:
+    """With ``final_glide`` the body frame appends the margin (mirror-invariant, inside the space);
+    the saved run's transform gives the wrapper's observations; tasks without a goal refuse it."""
+    from baselines.ppo import observation_transform, policy_frame
+
+    env = BodyFrameObservation(gym.make("soaring/SoaringContinuous-v0", scenario="random"), final_glide=True)
+    plain = BodyFrameObservation(gym.make("soaring/SoaringContinuous-v0", scenario="random"))
+    assert env.observation_space.shape[0] == plain.observation_space.shape[0] + 1
+    record = {"config": {"body_frame": True, "final_glide": True, "env_kwargs": {}}, "env_id": CONTINUOUS_ID}
+    fn = observation_transform(record)
+    assert fn is not None
+    raw_env = gym.make("soaring/SoaringContinuous-v0", scenario="random")
+    env.action_space.seed(0)
+    for seed in range(4):
+        o, _ = env.reset(seed=seed)
+        p, _ = plain.reset(seed=seed)
+        raw, _ = raw_env.reset(seed=seed)
+        assert np.array_equal(o[:-1], p) and np.array_equal(fn(raw), o) and env.observation_space.contains(o)
+        for _ in range(3):
+            a = env.action_space.sample()
+            o, _, term, trunc, _ = env.step(a)
+            raw, *_ = raw_env.step(a)
+            assert np.array_equal(fn(raw), o) and env.observation_space.contains(o)
+            if term or trunc:
+                break
+    names = env.unwrapped.observation_names
+    assert policy_frame(env, True).mirror_signs(names)[-1] == 1.0
+    with pytest.raises(ConfigError, match="goal"):
+        policy_frame(gym.make("soaring/ThermalClimbContinuous-v0"), True)
+    with pytest.raises(ValueError, match="final_glide"):
+        TrainConfig(task="climb", final_glide=True)
+    with pytest.raises(ValueError, match="final_glide"):
+        TrainConfig(final_glide="yes")  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize(
