@@ -123,8 +123,7 @@ def flattest_glide(model: Any) -> tuple[float, float]:
     """(airspeed [m/s], path angle [rad]) of the flattest zero-thrust straight glide in the model's
     continuous envelope (21 airspeeds; the glide angle that needs no thrust anywhere below the
     domain's ceiling): the best-L/D cruise."""
-    speeds = np.linspace(float(model.control_low[0]), float(model.control_high[0]), 21)
-    glide = model.aircraft.glide_angle(speeds, 0.0, model.scenario.bounds.height_max)
+    speeds, glide = model.straight_glides(21)
     k = int(np.argmax(glide))
     return float(speeds[k]), float(glide[k])
 

@@ -50,7 +50,13 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from soaring_env._validation import ConfigError
+from soaring_env._validation import (
+    ConfigError,
+    as_float_array,
+    check_array_finite,
+    check_bool,
+    check_positive,
+)
 from soaring_env.scenario import HELDOUT_SEED0, VALIDATION_SEED0, Scenario, atomic_write_text, get_scenario
 
 DISCRETE_ID = "soaring/Soaring-v0"
@@ -388,14 +394,27 @@ class FinalGlide:
     #: The margin's bound in height units (clipped, as every observation entry).
     BOUND = 3.0
 
+    def __post_init__(self) -> None:
+        v = as_float_array("airspeeds", self.airspeeds)
+        g = as_float_array("angles", self.angles)
+        if v.ndim != 1 or v.size < 1 or g.shape != v.shape:
+            raise ConfigError(
+                f"airspeeds ({v.size}) and angles ({g.size}) must be non-empty 1-D sequences of one length"
+            )
+        check_array_finite("airspeeds", v)
+        check_array_finite("angles", g)
+        if np.any(v <= 0.0) or np.any(g >= 0.0) or np.any(g <= -math.pi / 2):
+            raise ConfigError("airspeeds must be > 0 m/s and angles in (-pi/2, 0) rad (descending glides)")
+        for name in ("position_scale", "height_scale", "wind_scale"):
+            check_positive(name, getattr(self, name))
+
     @classmethod
     def of(cls, env: Any) -> FinalGlide:
         """From a goal env (unwrapped or not): 21 airspeeds across its envelope, the zero-thrust
         angles that hold up to the domain's ceiling (:meth:`Aircraft.glide_angle`)."""
         u = env.unwrapped
-        model, cfg = u.model, u.config
-        speeds = np.linspace(float(model.control_low[0]), float(model.control_high[0]), 21)
-        angles = model.aircraft.glide_angle(speeds, 0.0, model.scenario.bounds.height_max)
+        cfg = u.config
+        speeds, angles = u.model.straight_glides(21)
         return cls(
             tuple(float(v) for v in speeds),
             tuple(float(g) for g in angles),
@@ -414,23 +433,37 @@ class FinalGlide:
     ) -> np.ndarray:
         """The margin in height units, clipped to +-:attr:`BOUND`, from the raw (scaled) observation
         entries (arrays of one shape). The glide flies the goal's bearing, crabbing into the
-        crosswind; an airspeed whose ground speed is not positive is skipped."""
+        crosswind; an airspeed whose ground speed is not positive is skipped.
+
+        :raises ConfigError: a non-finite entry (observations are finite and clipped)."""
+        arrays = []
+        for name, x in zip(
+            ("goal_north", "goal_east", "goal_up", "wind_north", "wind_east"),
+            (goal_north, goal_east, goal_up, wind_north, wind_east),
+            strict=True,
+        ):
+            arrays.append(as_float_array(name, x))
+            check_array_finite(name, arrays[-1])
+        shape = arrays[0].shape
+        if any(a.shape != shape for a in arrays):
+            raise ConfigError(f"the margin's inputs must share one shape; got {[a.shape for a in arrays]}")
+        gn_, ge_, up_, wn_, we_ = (a.ravel() for a in arrays)
         v = np.asarray(self.airspeeds)[None, :]
         g = np.asarray(self.angles)[None, :]
-        gn, ge = goal_north.ravel() * self.position_scale, goal_east.ravel() * self.position_scale
+        gn, ge = gn_ * self.position_scale, ge_ * self.position_scale
         d = np.hypot(gn, ge)
         safe = np.where(d > 1e-9, d, 1.0)
         un, ue = np.where(d > 1e-9, gn / safe, 1.0), np.where(d > 1e-9, ge / safe, 0.0)
-        wn, we = wind_north.ravel() * self.wind_scale, wind_east.ravel() * self.wind_scale
+        wn, we = wn_ * self.wind_scale, we_ * self.wind_scale
         along, cross = wn * un + we * ue, -wn * ue + we * un
         va = v * np.cos(g)  # horizontal airspeed
         ground = np.sqrt(np.maximum(va**2 - cross[:, None] ** 2, 0.0)) + along[:, None]
         ok = ground > 0.1
         loss = np.where(ok, d[:, None] * (-v * np.sin(g)) / np.where(ok, ground, 1.0), np.inf).min(axis=1)
-        above = -goal_up.ravel() * self.height_scale  # height over the goal centre [m]
+        above = -up_ * self.height_scale  # height over the goal centre [m]
         reach = np.isfinite(loss)
         m = np.where(reach, (above - np.where(reach, loss, 0.0)) / self.height_scale, -self.BOUND)
-        return np.clip(m, -self.BOUND, self.BOUND).reshape(np.shape(goal_north))
+        return np.clip(m, -self.BOUND, self.BOUND).reshape(shape)
 
 
 class BodyFrame:
@@ -535,7 +568,7 @@ def policy_frame(env: Any, final_glide: bool = False) -> BodyFrame:
     """The :class:`BodyFrame` of ``env``'s layout (a single env, wrapped or not, or a batched env's
     template), with the :class:`FinalGlide` margin where ``final_glide``."""
     u = env.unwrapped if hasattr(env, "unwrapped") else env
-    return BodyFrame(u.observation_names, FinalGlide.of(u) if final_glide else None)
+    return BodyFrame(u.observation_names, FinalGlide.of(u) if check_bool("final_glide", final_glide) else None)
 
 
 class BodyFrameObservation(gym.ObservationWrapper):

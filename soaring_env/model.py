@@ -16,7 +16,14 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from soaring_env._validation import ConfigError, as_float_array, check_array_finite, check_range, check_type
+from soaring_env._validation import (
+    ConfigError,
+    as_float_array,
+    check_array_finite,
+    check_int,
+    check_range,
+    check_type,
+)
 from soaring_env.physics.aircraft import Aircraft, bank_angle
 from soaring_env.physics.atmosphere import MAX_HEIGHT
 from soaring_env.primitives import (
@@ -180,6 +187,14 @@ class SoaringModel:
     @property
     def control_high(self) -> np.ndarray:
         return self.control_envelope.bounds()[1]
+
+    def straight_glides(self, n: int = 21) -> tuple[np.ndarray, np.ndarray]:
+        """(airspeeds [m/s], path angles [rad]) of ``n`` straight zero-thrust glides at airspeeds
+        evenly spread over the continuous envelope's range; each angle needs no thrust at any height
+        up to the domain's ceiling (:meth:`~soaring_env.physics.aircraft.Aircraft.glide_angle`).
+        The glide polar the planner, the heuristic agent and the final-glide input read."""
+        speeds = np.linspace(self.control_low[0], self.control_high[0], check_int("n", n, 2, 10_000))
+        return speeds, self.aircraft.glide_angle(speeds, 0.0, self.scenario.bounds.height_max)
 
     def action_to_control(self, action) -> np.ndarray:
         """Map normalized actions in [-1, 1]^3 affinely onto the physical envelope."""

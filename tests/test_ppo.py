@@ -226,6 +226,38 @@ def test_final_glide_margin_closed_form_and_wind() -> None:
     assert m(0.0, 0.0, -3.0) == FinalGlide.BOUND
 
 
+def test_final_glide_bad_input() -> None:
+    """Bad polars, scales and inputs are ConfigErrors naming the field; the model's glide polar
+    checks its size."""
+    fg = FinalGlide.of(gym.make("soaring/SoaringContinuous-v0"))
+    one = np.ones(2)
+    with pytest.raises(ConfigError, match="goal_up"):
+        fg.margin(one, one, np.array([0.0, np.nan]), one, one)
+    with pytest.raises(ConfigError, match="wind_east"):
+        fg.margin(one, one, one, one, ["a", "b"])
+    with pytest.raises(ConfigError, match="shape"):
+        fg.margin(one, one, one, one, np.ones(3))
+    for bad in (
+        {"airspeeds": ()},
+        {"airspeeds": (10.0, -1.0)},
+        {"angles": (0.1, -0.1)},
+        {"angles": (float("nan"), -0.1)},
+        {"position_scale": 0.0},
+        {"height_scale": "1000"},
+        {"wind_scale": float("inf")},
+    ):
+        base = {"airspeeds": (10.0, 20.0), "angles": (-0.1, -0.1), "position_scale": 1e3, "height_scale": 1e3,
+                "wind_scale": 10.0}  # fmt: skip
+        with pytest.raises(ConfigError, match=next(iter(bad))):
+            FinalGlide(**{**base, **bad})  # type: ignore[arg-type]
+    model = gym.make("soaring/SoaringContinuous-v0").unwrapped.model
+    for n in (1, 0, 2.5, "21", True):
+        with pytest.raises(ConfigError, match="n="):
+            model.straight_glides(n)
+    speeds, angles = model.straight_glides(5)
+    assert speeds.shape == angles.shape == (5,) and np.all(angles < 0.0)
+
+
 def test_final_glide_in_the_body_frame() -> None:
     """With ``final_glide`` the body frame appends the margin (mirror-invariant, inside the space);
     the saved run's transform gives the wrapper's observations; tasks without a goal refuse it."""
@@ -259,6 +291,8 @@ def test_final_glide_in_the_body_frame() -> None:
         TrainConfig(task="climb", final_glide=True)
     with pytest.raises(ValueError, match="final_glide"):
         TrainConfig(final_glide="yes")  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="final_glide"):
+        policy_frame(env, "yes")  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize(

@@ -326,8 +326,7 @@ class SoaringProblem:
         self._h_cap = model.end_height_cap()
         self._thermal_centres = sc.field.centres(t0)
         self._t0 = t0
-        speeds = np.linspace(model.control_low[0], model.control_high[0], 41)
-        glide = model.aircraft.glide_angle(speeds, 0.0, b.height_max)
+        speeds, glide = model.straight_glides(41)
         self._glide_speed = float(speeds[int(np.argmax(glide))])  # flattest zero-thrust glide
         self._glide_angle = float(glide.max())
         self._speeds, self._speed_glide = speeds, glide
