@@ -497,6 +497,18 @@ class Propagator:
     ) -> tuple[np.ndarray, np.ndarray]:
         return self.run_fields(x0, t0, v_prev, ctrl, _NO_FIELD_INDEX, *self._field)
 
+    @property
+    def kernel_constants(self) -> tuple[float, int, int, float, np.ndarray]:
+        """The rollout kernel's arguments that stay fixed for this propagator: (duration [s], points
+        per edge, index of the second control segment's first point, largest substep [s], packed
+        aircraft row), for compiled callers that run the kernel inside their own (the envs' step)."""
+        return (*self._pre, self._ac)
+
+    @property
+    def field_tables(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """This propagator's own field as :meth:`run_fields` reads it: (thermals, n_thermals, params)."""
+        return self._field
+
     def run_fields(
         self,
         x0: np.ndarray,
@@ -689,7 +701,9 @@ def _rollout_kernel(
         g0 = 0.0
         g0_ok = False
         for k in range(n_pts):
-            if k == 0 or k == k_switch:
+            # A second segment that turns at the first one's rate needs none of this again: the
+            # same inputs give the same values (and f_prev is the thrust the last point computed).
+            if k == 0 or (k == k_switch and ctrl[b, 3] != ctrl[b, 2]):
                 om = ctrl[b, 2] if k < k_switch else ctrl[b, 3]
                 cd = math.cos(om * dt)
                 sd = math.sin(om * dt)

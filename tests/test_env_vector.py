@@ -316,3 +316,58 @@ def test_row_threads_raise_a_block_error_in_the_caller() -> None:
         pool.run(4 * MIN_ROWS_PER_THREAD, call)
     pool.close()
     pool.run(10, lambda r: None)  # closed: runs in the calling thread
+
+
+@pytest.mark.parametrize("continuous", [False, True])
+def test_step_rows_equals_rollout_then_post_step_and_skips_rows(continuous: bool) -> None:
+    """The fused step kernel gives exactly the rollout kernel's edges followed by post_step on every
+    row it flies; a skipped row gets zero terms, FLYING at the last point and its start as the new
+    state, and its other outputs are left untouched."""
+    from soaring_env.env._kernels import FLYING, post_step, step_rows
+
+    cls = SoaringContinuousVectorEnv if continuous else SoaringVectorEnv
+    env = cls(num_envs=40, scenario="random")
+    env.reset(seed=5)
+    rng = np.random.default_rng(2)
+    for _ in range(3):  # states spread over the field, some episodes already restarted
+        env.step(_actions(env.single_action_space, rng, env.num_envs))
+    t = env.template
+    b = env.num_envs
+    ctrl = env._controls(_actions(env.single_action_space, rng, b))
+    t_new = env.times + t._ts
+    dur, n_pts, k_switch, max_substep, ac = t._prop.kernel_constants
+
+    def outputs() -> list[np.ndarray]:
+        return [
+            np.full((b, n_pts, 4), -7.0), np.full((b, 6), -7.0), np.full(b, -7, np.int64), np.full(b, -7, np.int64),
+            np.full((b, 4), -7.0), np.full(b, -7.0), np.full(b, -7.0), np.full(b, -7.0),
+            np.full((b, env._n_obs), -7.0, np.float32),
+        ]  # fmt: skip
+
+    _, _, codes_a, ks_a, new_a, upd_a, lift_a, dist_a, obs_a = outputs()
+    out_r, terms_r = t._prop.run_fields(
+        env.states, env.times, env.airspeed_prev, ctrl, env._env_index, env._th, env._nth, env._fpar
+    )
+    post_step(
+        out_r, env.states, ctrl, t._dt, t_new, env._prm, env._th, env._nth, t._scales, t._k_obs, t._low, t._high,
+        t._goal_on, t._th_base, env._noise, codes_a, ks_a, new_a, upd_a, lift_a, dist_a, obs_a,
+    )  # fmt: skip
+    skip = rng.random(b) < 0.3
+    skip[:2] = [False, True]
+    out_b, terms_b, codes_b, ks_b, new_b, upd_b, lift_b, dist_b, obs_b = outputs()
+    step_rows(
+        skip, env.states, env.times, ctrl, env.airspeed_prev, env._env_index, dur, n_pts, k_switch, max_substep,
+        env._th, env._nth, env._fpar, ac, out_b, terms_b, t._dt, t_new, env._prm, env._th, env._nth, t._scales,
+        t._k_obs, t._low, t._high, t._goal_on, t._th_base, env._noise, codes_b, ks_b, new_b, upd_b, lift_b, dist_b,
+        obs_b,
+    )  # fmt: skip
+    fly = ~skip
+    for x, y in [(out_r, out_b), (terms_r, terms_b), (codes_a, codes_b), (ks_a, ks_b), (new_a, new_b),
+                 (upd_a, upd_b), (lift_a, lift_b), (dist_a, dist_b), (obs_a, obs_b)]:  # fmt: skip
+        assert np.array_equal(x[fly], y[fly])
+    assert np.all(terms_b[skip] == 0.0)
+    assert np.all(codes_b[skip] == FLYING) and np.all(ks_b[skip] == n_pts - 1)
+    assert np.array_equal(new_b[skip], env.states[skip])
+    assert np.all(upd_b[skip] == 0.0) and np.all(lift_b[skip] == 0.0)
+    assert np.all(out_b[skip] == -7.0) and np.all(dist_b[skip] == -7.0) and np.all(obs_b[skip] == -7.0)
+    env.close()

@@ -16,7 +16,7 @@ import numpy as np
 from gymnasium import spaces
 
 from soaring_env._validation import ConfigError
-from soaring_env.env._kernels import CRASH, FLYING, GOAL, OUT_OF_BOUNDS, post_step
+from soaring_env.env._kernels import CRASH, FLYING, GOAL, OUT_OF_BOUNDS, step_rows
 from soaring_env.env.config import ENERGY_SCALE, SoaringEnvConfig, choose_scenario, make_config, resolve_scenario
 from soaring_env.env.observation import (
     HISTORY_FEATURES,
@@ -46,6 +46,9 @@ PROGRESS_SCALE = 1000.0
 #: edges only, so that an episode without a time limit cannot grow memory without bound.
 MAX_PATH_EDGES = 10_000
 _ZERO_ROW = np.zeros(1, dtype=np.int64)
+#: step_rows arguments of a single env: no row skipped, its own field (index table empty)
+_NO_SKIP = np.zeros(1, dtype=np.bool_)
+_NO_FIELD = np.empty(0, dtype=np.int64)
 
 
 class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
@@ -516,39 +519,24 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         x0[0, :] = self.state
         self._t0[0] = self.time
         self._vp[0] = self.airspeed_prev
-        out, terms = self._prop.run(x0, self._t0, self._vp, ctrl)
         t_new = self.time + self._ts
         self._tn[0] = t_new
         obs = np.empty((1, self._n_obs), dtype=np.float32)
         new_state = np.empty((1, 4))
+        out = np.empty((1, self.library.n_points, 4))  # kept: the path of the flown part
+        terms = np.empty((1, 6))
         if self._noise_sigma:
             self._noise[:] = sensor_noise(
                 self._noise_key, np.array([self.steps + 1], dtype=np.uint64), self._noise_sigma
             )
-        post_step(
-            out,
-            x0,
-            ctrl,
-            self._dt,
-            self._tn,
-            self._prm,
-            self._th,
-            self._nth,
-            self._scales,
-            self._k_obs,
-            self._low,
-            self._high,
-            self._goal_on,
-            self._th_base,
-            self._noise,
-            self._codes,
-            self._ks,
-            new_state,
-            self._upd,
-            self._lift,
-            self._dist,
-            obs,
-        )
+        prop = self._prop
+        dur, n_pts, k_switch, max_substep, ac = prop.kernel_constants
+        step_rows(
+            _NO_SKIP, x0, self._t0, ctrl, self._vp, _NO_FIELD, dur, n_pts, k_switch, max_substep, *prop.field_tables,
+            ac, out, terms, self._dt, self._tn, self._prm, self._th, self._nth, self._scales, self._k_obs, self._low,
+            self._high, self._goal_on, self._th_base, self._noise, self._codes, self._ks, new_state, self._upd,
+            self._lift, self._dist, obs,
+        )  # fmt: skip
         code = int(self._codes[0])
         k = int(self._ks[0])
         fuel, potential, kinetic, cost, bank, _ = terms[0].tolist()

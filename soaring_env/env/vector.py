@@ -41,7 +41,7 @@ from soaring_env.env._kernels import (
     GOAL,
     OUT_OF_BOUNDS,
     classify_batch,
-    post_step,
+    step_rows,
 )
 from soaring_env.env.config import SoaringEnvConfig, choose_scenario
 from soaring_env.env.core import SoaringBaseEnv, SoaringContinuousEnv, SoaringEnv
@@ -160,6 +160,9 @@ class _SoaringVectorBase(VectorEnv):
         self._upd = np.zeros(b)
         self._dist = np.zeros(b)
         self._prev_done = np.zeros(b, dtype=np.bool_)
+        self._no_skip = np.zeros(b, dtype=np.bool_)
+        #: the edges of the last step (B, N, 4), rewritten by every step
+        self._out = np.empty((b, tmpl.library.n_points, 4))
         self._prm = np.zeros((b, N_PARAMS))
         self._th = np.zeros((b, 1, PACKED_COLUMNS))
         self._nth = np.zeros(b, dtype=np.int64)
@@ -448,42 +451,29 @@ class _SoaringVectorBase(VectorEnv):
         t = self.template
         b = self.num_envs
         autoreset = self._prev_done.copy() if self.autoreset_mode == AutoresetMode.NEXT_STEP else None
-        out, terms = self._rollout(self.states, self.times, self.airspeed_prev, ctrl, self._env_index)
+        # Envs that autoreset in this step (next-step mode) throw their edge away: not flown.
+        skip = autoreset if autoreset is not None else self._no_skip
         t_new = self.times + t._ts
         obs = np.empty((b, self._n_obs), dtype=np.float32)
         new_states = np.empty((b, 4))
         codes = np.empty(b, dtype=np.int64)
         ks = np.empty(b, dtype=np.int64)
+        terms = np.empty((b, 6))
+        out = self._out
+        dur, n_pts, k_switch, max_substep, ac = t._prop.kernel_constants  # same for every env
         if t._noise_sigma:
             self._noise[:] = sensor_noise(self._noise_key, (self.steps + 1).astype(np.uint64), t._noise_sigma)
 
-        def bookkeeping(r: slice) -> None:
-            post_step(
-                out[r],
-                self.states[r],
-                ctrl[r],
-                t._dt,
-                t_new[r],
-                self._prm[r],
-                self._th[r],
-                self._nth[r],
-                t._scales,
-                t._k_obs,
-                t._low,
-                t._high,
-                t._goal_on,
-                t._th_base,
-                self._noise[r],
-                codes[r],
-                ks[r],
-                new_states[r],
-                self._upd[r],
-                self._lift[r],
-                self._dist[r],
-                obs[r],
-            )
+        def block(r: slice) -> None:
+            step_rows(
+                skip[r], self.states[r], self.times[r], ctrl[r], self.airspeed_prev[r], self._env_index[r], dur,
+                n_pts, k_switch, max_substep, self._th, self._nth, self._fpar, ac, out[r], terms[r], t._dt, t_new[r],
+                self._prm[r], self._th[r], self._nth[r], t._scales, t._k_obs, t._low, t._high, t._goal_on,
+                t._th_base, self._noise[r], codes[r], ks[r], new_states[r], self._upd[r], self._lift[r],
+                self._dist[r], obs[r],
+            )  # fmt: skip
 
-        self._threads.run(b, bookkeeping)
+        self._threads.run(b, block)
         tt = terms.T.copy()  # (6, B): one copy gives every per-term info array below
         if t.has_battery:
             self.battery_left = self.battery_left - (tt[0] + tt[2])
