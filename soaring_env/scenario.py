@@ -23,7 +23,7 @@ import tempfile
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -749,6 +749,36 @@ def _check_field_ranges(
     return n, st, ws, z, d
 
 
+class TaskSettings(NamedTuple):
+    """The validated keywords of a task generator, as its draws read them (:func:`task_settings`).
+
+    ``kind`` is ``"climb"`` (:func:`make_climb_scenario`: ``n_thermals``, ``thermal_radius`` [m] and
+    the fixed ``bounds``) or ``"xc"`` (:func:`make_cross_country_scenario`: ``goal_distance``,
+    ``thermals_per_km``, ``corridor``, ``margin``, ``goal_height``, ``height_max`` [m]); the fields
+    of the other kind keep their defaults. ``time`` holds the life-cycle and fluctuation options
+    (lifetimes, rise time, birth window, amplitudes, periods), None when both are off.
+    """
+
+    kind: str
+    height: tuple[float, float]
+    strength: tuple[float, float]
+    wind_speed: tuple[float, float]
+    model: str
+    zi: float
+    drift: bool
+    time: _TimeOptions | None
+    name: str
+    bounds: Bounds | None = None
+    n_thermals: tuple[int, int] = (0, 0)
+    thermal_radius: float = 0.0
+    goal_distance: tuple[float, float] = (0.0, 0.0)
+    thermals_per_km: tuple[float, float] = (0.0, 0.0)
+    corridor: float = 0.0
+    margin: float = 0.0
+    goal_height: float = 0.0
+    height_max: float = 0.0
+
+
 #: Goal radius of the cross-country task [m].
 CROSS_COUNTRY_GOAL_RADIUS = 300.0
 
@@ -784,6 +814,37 @@ def make_climb_scenario(
     ``variation_period``) are those of :func:`make_scenario`.
     """
     check_type("rng", rng, np.random.Generator)
+    s = _climb_settings(
+        n_thermals, strength, thermal_radius, wind_speed, height, model, zi, drift, half_width, height_max,
+        lifecycle, rise_time, birth_window, strength_variation, variation_period, name,
+    )  # fmt: skip
+    chi = rng.uniform(-math.pi, math.pi)
+    h0 = rng.uniform(*s.height)
+    k = int(rng.integers(s.n_thermals[0], s.n_thermals[1] + 1))
+    thermals = []
+    for _ in range(k):
+        r = s.thermal_radius * math.sqrt(rng.uniform(0.0, 1.0))  # uniform over the disc
+        a = rng.uniform(-math.pi, math.pi)
+        thermals.append(Thermal(north=r * math.cos(a), east=r * math.sin(a), strength=rng.uniform(*s.strength)))
+    wn, we = _draw_wind(rng, s.wind_speed)
+    if s.time is not None:
+        thermals = _draw_time_dependence(rng, thermals, *s.time)
+    assert s.bounds is not None  # the climb's settings always hold its domain
+    return Scenario(
+        field=WindField(thermals=tuple(thermals), model=s.model, zi=s.zi, wind_north=wn, wind_east=we, drift=s.drift),
+        start=(0.0, 0.0, chi, h0),
+        goal=None,
+        bounds=s.bounds,
+        name=s.name,
+    )
+
+
+def _climb_settings(
+    n_thermals: Any, strength: Any, thermal_radius: Any, wind_speed: Any, height: Any, model: Any, zi: Any,
+    drift: Any, half_width: Any, height_max: Any, lifecycle: Any, rise_time: Any, birth_window: Any,
+    strength_variation: Any, variation_period: Any, name: Any,
+) -> TaskSettings:  # fmt: skip
+    """The validated keywords of :func:`make_climb_scenario` (a bad one raises a ConfigError naming it)."""
     n_thermals, strength, wind_speed, zi, drift = _check_field_ranges(
         n_thermals, strength, wind_speed, model, zi, drift, name
     )
@@ -794,24 +855,10 @@ def make_climb_scenario(
     height = check_pair("height", height, 0.0, bounds.height_max)
     if height[0] <= 0.0:
         raise ConfigError(f"height={height!r} must have low > 0 m (above the ground)")
-    chi = rng.uniform(-math.pi, math.pi)
-    h0 = rng.uniform(*height)
-    k = int(rng.integers(n_thermals[0], n_thermals[1] + 1))
-    thermals = []
-    for _ in range(k):
-        r = r_max * math.sqrt(rng.uniform(0.0, 1.0))  # uniform over the disc
-        a = rng.uniform(-math.pi, math.pi)
-        thermals.append(Thermal(north=r * math.cos(a), east=r * math.sin(a), strength=rng.uniform(*strength)))
-    wn, we = _draw_wind(rng, wind_speed)
-    if time_kw is not None:
-        thermals = _draw_time_dependence(rng, thermals, *time_kw)
-    return Scenario(
-        field=WindField(thermals=tuple(thermals), model=model, zi=zi, wind_north=wn, wind_east=we, drift=drift),
-        start=(0.0, 0.0, chi, h0),
-        goal=None,
-        bounds=bounds,
-        name=name,
-    )
+    return TaskSettings(
+        kind="climb", height=height, strength=strength, wind_speed=wind_speed, model=model, zi=zi, drift=drift,
+        time=time_kw, name=name, bounds=bounds, n_thermals=n_thermals, thermal_radius=r_max,
+    )  # fmt: skip
 
 
 def make_cross_country_scenario(
@@ -849,6 +896,45 @@ def make_cross_country_scenario(
     makes the thermals necessary. Thermal realism options as :func:`make_scenario`.
     """
     check_type("rng", rng, np.random.Generator)
+    s = _cross_country_settings(
+        goal_distance, thermals_per_km, corridor, strength, wind_speed, height, goal_height, model, zi, drift,
+        margin, height_max, lifecycle, rise_time, birth_window, strength_variation, variation_period, name,
+    )  # fmt: skip
+    dist = rng.uniform(*s.goal_distance)
+    bearing = rng.uniform(-math.pi, math.pi)
+    gn, ge = dist * math.cos(bearing), dist * math.sin(bearing)
+    chi = bearing + rng.uniform(-math.pi / 2, math.pi / 2)
+    chi = (chi + math.pi) % (2 * math.pi) - math.pi
+    h0 = rng.uniform(*s.height)
+    k = min(int(round(rng.uniform(*s.thermals_per_km) * dist / 1000.0)), MAX_RANDOM_THERMALS)
+    thermals = []
+    for _ in range(k):
+        along = rng.uniform(0.05, 1.0) * dist
+        across = rng.uniform(-s.corridor, s.corridor)
+        tn = along * math.cos(bearing) - across * math.sin(bearing)
+        te = along * math.sin(bearing) + across * math.cos(bearing)
+        thermals.append(Thermal(north=tn, east=te, strength=rng.uniform(*s.strength)))
+    wn, we = _draw_wind(rng, s.wind_speed)
+    if s.time is not None:
+        thermals = _draw_time_dependence(rng, thermals, *s.time)
+    pad, top = s.margin, s.height_max
+    bounds = Bounds(min(0.0, gn) - pad, max(0.0, gn) + pad, min(0.0, ge) - pad, max(0.0, ge) + pad, top)
+    return Scenario(
+        field=WindField(thermals=tuple(thermals), model=s.model, zi=s.zi, wind_north=wn, wind_east=we, drift=s.drift),
+        start=(0.0, 0.0, chi, h0),
+        goal=GoalRegion(north=gn, east=ge, height=s.goal_height, radius=CROSS_COUNTRY_GOAL_RADIUS),
+        bounds=bounds,
+        name=s.name,
+    )
+
+
+def _cross_country_settings(
+    goal_distance: Any, thermals_per_km: Any, corridor: Any, strength: Any, wind_speed: Any, height: Any,
+    goal_height: Any, model: Any, zi: Any, drift: Any, margin: Any, height_max: Any, lifecycle: Any,
+    rise_time: Any, birth_window: Any, strength_variation: Any, variation_period: Any, name: Any,
+) -> TaskSettings:  # fmt: skip
+    """The validated keywords of :func:`make_cross_country_scenario` (a bad one raises a ConfigError
+    naming it)."""
     rate = check_pair("thermals_per_km", thermals_per_km, 0.0, 10.0)
     _, strength, wind_speed, zi, drift = _check_field_ranges((0, 0), strength, wind_speed, model, zi, drift, name)
     time_kw = _check_time_options(lifecycle, rise_time, birth_window, strength_variation, variation_period)
@@ -862,32 +948,38 @@ def make_cross_country_scenario(
     if height[0] <= 0.0:
         raise ConfigError(f"height={height!r} must have low > 0 m (above the ground)")
     gh = check_range("goal_height", goal_height, 0.0, top, low_open=True)
-    dist = rng.uniform(*dist_range)
-    bearing = rng.uniform(-math.pi, math.pi)
-    gn, ge = dist * math.cos(bearing), dist * math.sin(bearing)
-    chi = bearing + rng.uniform(-math.pi / 2, math.pi / 2)
-    chi = (chi + math.pi) % (2 * math.pi) - math.pi
-    h0 = rng.uniform(*height)
-    k = min(int(round(rng.uniform(*rate) * dist / 1000.0)), MAX_RANDOM_THERMALS)
-    thermals = []
-    for _ in range(k):
-        along = rng.uniform(0.05, 1.0) * dist
-        across = rng.uniform(-width, width)
-        tn = along * math.cos(bearing) - across * math.sin(bearing)
-        te = along * math.sin(bearing) + across * math.cos(bearing)
-        thermals.append(Thermal(north=tn, east=te, strength=rng.uniform(*strength)))
-    wn, we = _draw_wind(rng, wind_speed)
-    if time_kw is not None:
-        thermals = _draw_time_dependence(rng, thermals, *time_kw)
-    bounds = Bounds(min(0.0, gn) - pad, max(0.0, gn) + pad, min(0.0, ge) - pad, max(0.0, ge) + pad, top)
-    return Scenario(
-        field=WindField(thermals=tuple(thermals), model=model, zi=zi, wind_north=wn, wind_east=we, drift=drift),
-        start=(0.0, 0.0, chi, h0),
-        goal=GoalRegion(north=gn, east=ge, height=gh, radius=CROSS_COUNTRY_GOAL_RADIUS),
-        bounds=bounds,
-        name=name,
-    )
+    return TaskSettings(
+        kind="xc", height=height, strength=strength, wind_speed=wind_speed, model=model, zi=zi, drift=drift,
+        time=time_kw, name=name, goal_distance=dist_range, thermals_per_km=rate, corridor=width, margin=pad,
+        goal_height=gh, height_max=top,
+    )  # fmt: skip
 
+
+def task_settings(generator: Callable[..., Scenario], kwargs: Mapping[str, Any]) -> TaskSettings:
+    """The validated settings of a task generator (:func:`make_climb_scenario` or
+    :func:`make_cross_country_scenario`) called with ``kwargs`` (its defaults for the others): what its
+    draws read, for the batched draws of the envs. A bad keyword raises the generator's ConfigError."""
+    if generator not in _TASK_SETTINGS:
+        raise ConfigError(
+            f"generator={generator!r} is not a task generator; allowed: {sorted(g.__name__ for g in _TASK_SETTINGS)}"
+        )
+    try:
+        bound = inspect.signature(generator).bind(None, **dict(kwargs))
+    except TypeError as err:
+        raise ConfigError(f"{generator.__name__}: {err}") from None
+    bound.apply_defaults()
+    args = dict(bound.arguments)
+    args.pop("rng")
+    return _TASK_SETTINGS[generator](**args)
+
+
+_TASK_SETTINGS: dict[Callable[..., Scenario], Callable[..., TaskSettings]] = {
+    make_climb_scenario: _climb_settings,
+    make_cross_country_scenario: _cross_country_settings,
+}
+
+#: The task generators, whose draws the envs can make in batches (:func:`task_settings`).
+TASK_GENERATORS = frozenset(_TASK_SETTINGS)
 
 #: The random-scenario generators by family: ``<family>-<seed>`` names and the envs' ``"random"``
 #: mode draw from them (goal reaching ``random``, thermal climb ``climb``, cross-country ``xc``).

@@ -1,5 +1,6 @@
 """Batched random scenarios (distribution v2): determinism, packed rows that rebuild into identical
-Scenarios, the keyword ranges, validation, single env == vector env row, and v1 left untouched."""
+Scenarios, the keyword ranges, validation, single env == vector env row, and v1 left untouched;
+batched task draws equal to their generators' scenarios bit for bit."""
 
 from __future__ import annotations
 
@@ -22,13 +23,24 @@ from soaring_env.env.observation import P_GE, P_GH, P_GN, P_WE, P_WN, scenario_p
 from soaring_env.env.scenario_batch import (
     RANDOM_SCENARIO_VERSION,
     ScenarioSampler,
+    TaskSampler,
     draw_scenario_arrays,
     draw_width,
+    generator_list,
     random_spec,
 )
 from soaring_env.env.vector import SoaringVectorEnv
 from soaring_env.physics.thermals import PACKED_COLUMNS
-from soaring_env.scenario import RANDOM_MARGIN, Bounds, Scenario, get_scenario, heldout_names, make_scenario
+from soaring_env.scenario import (
+    RANDOM_MARGIN,
+    Bounds,
+    Scenario,
+    get_scenario,
+    heldout_names,
+    make_climb_scenario,
+    make_cross_country_scenario,
+    make_scenario,
+)
 from soaring_env.scenario import RandomScenarioSpec as Spec
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -338,3 +350,98 @@ def test_default_thermal_along_keeps_the_draws_bit_for_bit() -> None:
     assert hashlib.sha256(blob).hexdigest() == "fc4296fba8545b2b78553db8e82af4aa0fdf1c42062be5e8834e32f02148de60"
     explicit = make_scenario(np.random.default_rng(11), thermal_along=(0.2, 0.8))
     assert make_scenario(np.random.default_rng(11)) == explicit
+
+
+TASK_CASES = [
+    (make_climb_scenario, {}),
+    (make_cross_country_scenario, {}),
+    (make_climb_scenario, {"lifecycle": (600.0, 1200.0), "birth_window": (-300.0, 300.0)}),
+    (make_cross_country_scenario, {"strength_variation": (0.0, 0.5), "drift": True}),
+    (
+        make_climb_scenario,
+        {
+            "lifecycle": (400.0, 900.0),
+            "strength_variation": (0.1, 0.4),
+            "variation_period": (60.0, 200.0),
+            "model": "gaussian",
+            "drift": True,
+            "wind_speed": (1.0, 5.0),
+            "n_thermals": (0, 2),
+        },
+    ),
+    (make_cross_country_scenario, {"lifecycle": (900.0, 1800.0), "rise_time": 200.0, "goal_distance": (3e3, 3e4)}),
+]
+
+
+@pytest.mark.parametrize(("generator", "kw"), TASK_CASES)
+def test_task_draws_are_the_generators_scenarios_bit_for_bit(generator, kw: dict) -> None:
+    """A batched task draw makes exactly the generator's calls: the rows are those of the Scenario
+    the Python generator gives from the same state, and the generator ends in the same state."""
+    n = 60
+    sampler = TaskSampler(generator, kw)
+    gens = [np.random.default_rng(s) for s in range(n)]
+    twins = [np.random.default_rng(s) for s in range(n)]
+    prm = np.zeros((n, scenario_params(make_scenario(np.random.default_rng(0))).size))
+    th = np.zeros((n, sampler.max_thermals, PACKED_COLUMNS))
+    nth = np.zeros(n, dtype=np.int64)
+    start = np.zeros((n, 4))
+    rows = np.arange(n, dtype=np.int64)[::-1].copy()  # any order: each row reads its own generator
+    sampler.draw_each(rows, generator_list(gens), prm, th, nth, start)
+    for i in range(n):
+        sc = generator(twins[i], **kw)
+        assert _bits(prm[i]) == _bits(scenario_params(sc))
+        assert nth[i] == len(sc.field.thermals)
+        assert _bits(th[i, : nth[i]]) == _bits(sc.field.packed)
+        assert _bits(start[i]) == _bits(np.array(sc.start))
+        assert gens[i].bit_generator.state == twins[i].bit_generator.state
+
+
+def test_task_sampler_input_is_checked() -> None:
+    with pytest.raises(ConfigError, match="not a task generator"):
+        TaskSampler(make_scenario, {})
+    with pytest.raises(ConfigError, match="unexpected keyword"):
+        TaskSampler(make_climb_scenario, {"goal_distance": (1.0, 2.0)})
+    with pytest.raises(ConfigError, match="corridor"):
+        TaskSampler(make_cross_country_scenario, {"corridor": -1.0})
+    sampler = TaskSampler(make_cross_country_scenario, {})
+    assert sampler.max_thermals == 31  # round(2 per km x 15 km) + 1
+    small = np.zeros((1, 3, PACKED_COLUMNS))
+    with pytest.raises(ConfigError, match="slots"):
+        sampler.draw_each(np.zeros(1, dtype=np.int64), generator_list([np.random.default_rng(0)]), *(
+            np.zeros((1, 15)), small, np.zeros(1, dtype=np.int64), np.zeros((1, 4))))  # fmt: skip
+
+
+@pytest.mark.parametrize("env_id", ["soaring/ThermalClimbContinuous-v0", "soaring/CrossCountry-v0"])
+def test_task_vector_env_draws_in_batches_and_builds_scenarios_on_demand(env_id: str) -> None:
+    """The native task env draws its resets in one call and builds each Scenario only when asked:
+    the same Scenario (and battery) as the single env of the same seed, episode after episode."""
+    n = 4
+    venv = gym.make_vec(env_id, num_envs=n)
+    singles = [gym.make(env_id) for _ in range(n)]
+    venv.reset(seed=30)
+    for i, s in enumerate(singles):
+        s.reset(seed=30 + i)
+    assert venv._task_sampler is not None and venv._lazy.all()
+    rng = np.random.default_rng(3)
+    done = np.zeros(n, dtype=bool)
+    resets = 0
+    for step in range(40):
+        a = (
+            rng.integers(0, 174, n)
+            if isinstance(singles[0].action_space, gym.spaces.Discrete)
+            else rng.uniform(-1, 1, (n, 3)).astype(np.float32)
+        )
+        venv.step(a)
+        for i, s in enumerate(singles):
+            if done[i]:
+                s.reset()
+                done[i] = False
+                resets += 1
+            else:
+                _, _, t1, t2, _ = s.step(a[i])
+                done[i] = t1 or t2
+        if step % 5 == 0:
+            for i, (sc, s) in enumerate(zip(venv.scenarios, singles, strict=True)):
+                assert sc == s.unwrapped.scenario
+                assert venv.battery[i] == s.unwrapped.battery
+    assert resets > 0

@@ -280,7 +280,8 @@ def test_task_configs_are_frozen_dataclasses_with_own_defaults() -> None:
 @pytest.mark.parametrize("env_id", ["soaring/Soaring-v0", "soaring/ThermalClimbContinuous-v0"])
 def test_thermal_realism_options_are_reproducible_and_batched_alike(env_id: str) -> None:
     """Life cycles and fluctuations drawn from each env's generator: the same per seed, and the
-    batched env equal to single envs (these draws go one Scenario at a time, not the v2 batch)."""
+    batched env equal to single envs (goal reaching draws these one Scenario at a time; the task
+    envs in batches that give the same scenarios)."""
     kw = {
         "scenario": "random",
         "random_scenario": {

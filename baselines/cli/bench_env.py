@@ -11,6 +11,9 @@ Prints env steps per second for ``soaring/Soaring-v0``, ``soaring/SoaringContinu
   scenario at every reset, drawn in batches) makes at least 1,000,000 env-steps per second on one
   core; its ratio to the fixed-scenario row of the same run is printed with it.
 
+Two more one-core rows without a target: the natively batched continuous thermal-climb and
+cross-country ids, whose resets draw task scenarios (in batches since 2026-12-05).
+
 The process is pinned to one core (``os.sched_setaffinity`` where available) and numba to one
 thread, so the numbers above are single-core numbers. Then, where the process may use more than one
 core, the two native 1024-env rows are measured again with ``num_threads`` = ``--threads`` (default:
@@ -90,6 +93,10 @@ def single_env_runner(env_id: str, seed: int = 0, **kwargs) -> Callable[[float],
     return run
 
 
+#: task ids measured natively batched (rows without a target: resets draw task scenarios)
+TASK_ROWS = ("soaring/ThermalClimbContinuous-v0", "soaring/CrossCountryContinuous-v0")
+
+
 def vector_env_runner(env_id: str, num_envs: int, mode: str | None, **kwargs) -> Callable[[float], tuple[int, float]]:
     env = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode=mode, **kwargs)
     env.reset(seed=0)
@@ -167,6 +174,11 @@ def main(argv: list[str] | None = None) -> int:
         f"Soaring-v0 native batched env, {args.num_envs} envs, random scen.",
         vector_env_runner("soaring/Soaring-v0", args.num_envs, None, scenario="random"),
     )
+    for task_id in TASK_ROWS:  # their default: a new random task scenario at every reset
+        measure(
+            f"{task_id.split('/')[1]} native, {args.num_envs} envs",
+            vector_env_runner(task_id, args.num_envs, None),
+        )
 
     multi: list[tuple[str, float, float]] = []
     if threads > 1 and len(cores) > 1 and hasattr(os, "sched_setaffinity"):

@@ -19,6 +19,13 @@ Distribution versions (:data:`RANDOM_SCENARIO_VERSION`):
   of scenarios; but the generator's stream is used differently (each draw reads a fixed block of
   :func:`draw_width` uniforms), so a seed gives other scenarios than under v1.
 
+Task scenarios (thermal climb, cross-country) are drawn in batches too (:class:`TaskSampler`), but
+not as a new version: the kernel makes exactly the generator calls of
+:func:`~soaring_env.scenario.make_climb_scenario` / :func:`~soaring_env.scenario.make_cross_country_scenario`
+(numba's ``Generator`` methods are numpy's algorithms), so a generator state gives the same scenario
+either way, bit for bit, life cycles and fluctuations included, and the held-out ``climb-<seed>`` and
+``xc-<seed>`` sets need no versioning.
+
 Streams: a draw reads its uniforms straight from a numpy generator inside the kernel (exactly the
 numbers ``rng.random()`` would return, advancing that generator): each try reads
 :func:`draw_width` uniforms, and a try whose start or goal lies near the domain's edges is followed
@@ -46,16 +53,35 @@ from soaring_env.env.observation import (
     N_PARAMS,
     P_DVX,
     P_DVY,
+    P_EMAX,
+    P_EMIN,
     P_GE,
     P_GH,
     P_GN,
     P_GR,
+    P_NMAX,
+    P_NMIN,
     P_WE,
     P_WN,
     scenario_params,
 )
-from soaring_env.physics.thermals import COL_PEAK, COL_STRENGTH, PACKED_COLUMNS, Thermal, WindField
+from soaring_env.physics.thermals import (
+    COL_AMPLITUDE,
+    COL_BIRTH,
+    COL_DEATH,
+    COL_DECAY,
+    COL_DYNAMIC,
+    COL_OMEGA,
+    COL_PEAK,
+    COL_PHASE,
+    COL_RISE,
+    COL_STRENGTH,
+    PACKED_COLUMNS,
+    Thermal,
+    WindField,
+)
 from soaring_env.scenario import (
+    MAX_RANDOM_THERMALS,
     NO_FIT,
     RANDOM_MARGIN,
     RANDOM_TRIES,
@@ -63,7 +89,9 @@ from soaring_env.scenario import (
     GoalRegion,
     RandomScenarioSpec,
     Scenario,
+    TaskSettings,
     make_scenario,
+    task_settings,
 )
 
 #: The distribution of the envs' ``"random"`` mode: 2 = this module's batched draw (v1 =
@@ -271,7 +299,44 @@ def set_generator(gens: Any, i: int, g: np.random.Generator) -> None:
     _set_generator(gens, i, g)
 
 
-class ScenarioSampler:
+class _RowSampler:
+    """What the envs' batched draws share: rows drawn into packed tables, one generator per row."""
+
+    @property
+    def max_thermals(self) -> int:
+        """Most thermals a draw can have (the width a thermal table needs)."""
+        raise NotImplementedError
+
+    def _draw_rows(
+        self,
+        rows: np.ndarray,
+        gens: Any,
+        params: np.ndarray,
+        thermals: np.ndarray,
+        n_thermals: np.ndarray,
+        start: np.ndarray,
+    ) -> None:
+        raise NotImplementedError
+
+    def _check_slots(self, thermals: np.ndarray) -> None:
+        if thermals.shape[1] < self.max_thermals:
+            raise ConfigError(f"thermal table has {thermals.shape[1]} slots; draws need {self.max_thermals}")
+
+    def draw_each(
+        self,
+        rows: np.ndarray,
+        gens: Any,
+        params: np.ndarray,
+        thermals: np.ndarray,
+        n_thermals: np.ndarray,
+        start: np.ndarray,
+    ) -> None:
+        """Draw row ``i`` of ``rows`` (int64) from ``gens[i]`` (a :func:`generator_list`), all in one call."""
+        self._check_slots(thermals)
+        self._draw_rows(rows, gens, params, thermals, n_thermals, start)
+
+
+class ScenarioSampler(_RowSampler):
     """v2 random scenarios of one set of keywords, drawn into packed rows.
 
     :param spec: the keywords (a :class:`~soaring_env.scenario.RandomScenarioSpec` or a dict of
@@ -299,7 +364,7 @@ class ScenarioSampler:
         """Most thermals a draw can have (the width a thermal table needs)."""
         return self.spec.n_thermals[1]
 
-    def draw_each(
+    def _draw_rows(
         self,
         rows: np.ndarray,
         gens: Any,
@@ -308,9 +373,6 @@ class ScenarioSampler:
         n_thermals: np.ndarray,
         start: np.ndarray,
     ) -> None:
-        """Draw row ``i`` of ``rows`` (int64) from ``gens[i]`` (a :func:`generator_list`), all in one call."""
-        if thermals.shape[1] < self.max_thermals:
-            raise ConfigError(f"thermal table has {thermals.shape[1]} slots; draws need {self.max_thermals}")
         failed = _draw_each(rows, gens, *self._args, params, thermals, n_thermals, start)
         if failed >= 0:
             raise ConfigError(NO_FIT)
@@ -326,8 +388,7 @@ class ScenarioSampler:
     ) -> None:
         """Draw the rows ``rows`` (int64) in order, all from ``rng``."""
         check_type("rng", rng, np.random.Generator)
-        if thermals.shape[1] < self.max_thermals:
-            raise ConfigError(f"thermal table has {thermals.shape[1]} slots; draws need {self.max_thermals}")
+        self._check_slots(thermals)
         failed = _draw_from(rows, rng, *self._args, params, thermals, n_thermals, start)
         if failed >= 0:
             raise ConfigError(NO_FIT)
@@ -341,6 +402,187 @@ class ScenarioSampler:
         start = np.empty((n, 4))
         self.draw_from(np.arange(n, dtype=np.int64), rng, params, thermals, counts, start)
         return ScenarioBatch(spec=self.spec, params=params, thermals=thermals, n_thermals=counts, start=start)
+
+
+# --- task scenarios ------------------------------------------------------------------------------
+# Columns of a task draw's settings row (_task_row): both kinds, then climb, then cross-country.
+_T_H, _T_S, _T_WS, _T_LIFE, _T_RISE, _T_BIRTH, _T_AMP, _T_PERIOD = 0, 2, 4, 6, 8, 9, 11, 13
+_T_NLO, _T_NHI, _T_RMAX = 15, 16, 17
+_T_GD, _T_RATE, _T_WIDTH, _T_PAD, _T_MAXK = 18, 20, 22, 23, 24
+_N_TASK = 25
+_CLIMB, _XC = 0, 1
+
+
+def _task_row(s: TaskSettings) -> np.ndarray:
+    row = np.zeros(_N_TASK)
+    row[_T_H : _T_H + 2] = s.height
+    row[_T_S : _T_S + 2] = s.strength
+    row[_T_WS : _T_WS + 2] = s.wind_speed
+    if s.time is not None:
+        life, rise, births, amp, period = s.time
+        if life is not None:
+            row[_T_LIFE : _T_LIFE + 2] = life
+        row[_T_RISE] = rise
+        row[_T_BIRTH : _T_BIRTH + 2] = births
+        if amp is not None:
+            row[_T_AMP : _T_AMP + 2] = amp
+        row[_T_PERIOD : _T_PERIOD + 2] = period
+    row[_T_NLO], row[_T_NHI] = s.n_thermals
+    row[_T_RMAX] = s.thermal_radius
+    row[_T_GD : _T_GD + 2] = s.goal_distance
+    row[_T_RATE : _T_RATE + 2] = s.thermals_per_km
+    row[_T_WIDTH] = s.corridor
+    row[_T_PAD] = s.margin
+    row[_T_MAXK] = MAX_RANDOM_THERMALS
+    row.setflags(write=False)
+    return row
+
+
+@njit(cache=True)
+def _draw_task_row(
+    g: Any,
+    i: int,
+    kind: int,
+    r: np.ndarray,
+    has_life: bool,
+    has_amp: bool,
+    prm_t: np.ndarray,
+    th_t: np.ndarray,
+    prm: np.ndarray,
+    th: np.ndarray,
+    nth: np.ndarray,
+    start: np.ndarray,
+) -> None:
+    """One task scenario from generator ``g`` into row ``i``: the calls of ``make_climb_scenario``
+    (``kind`` 0) or ``make_cross_country_scenario`` (1) on ``g``, in their order, with their
+    arithmetic (no fast-math: every value is the one the generator's Python computes)."""
+    pi = math.pi
+    gn = ge = 0.0
+    if kind == _CLIMB:
+        chi = g.uniform(-pi, pi)
+        h0 = g.uniform(r[_T_H], r[_T_H + 1])
+        k = g.integers(int(r[_T_NLO]), int(r[_T_NHI]) + 1)
+        for j in range(k):
+            rad = r[_T_RMAX] * math.sqrt(g.uniform(0.0, 1.0))
+            a = g.uniform(-pi, pi)
+            th[i, j, :] = th_t
+            th[i, j, 0] = rad * math.cos(a)
+            th[i, j, 1] = rad * math.sin(a)
+            th[i, j, COL_STRENGTH] = g.uniform(r[_T_S], r[_T_S + 1])
+    else:
+        dist = g.uniform(r[_T_GD], r[_T_GD + 1])
+        bearing = g.uniform(-pi, pi)
+        gn = dist * math.cos(bearing)
+        ge = dist * math.sin(bearing)
+        chi = bearing + g.uniform(-pi / 2, pi / 2)
+        chi = (chi + pi) % (2 * pi) - pi
+        h0 = g.uniform(r[_T_H], r[_T_H + 1])
+        k = min(int(round(g.uniform(r[_T_RATE], r[_T_RATE + 1]) * dist / 1000.0)), int(r[_T_MAXK]))
+        width = r[_T_WIDTH]
+        for j in range(k):
+            along = g.uniform(0.05, 1.0) * dist
+            across = g.uniform(-width, width)
+            th[i, j, :] = th_t
+            th[i, j, 0] = along * math.cos(bearing) - across * math.sin(bearing)
+            th[i, j, 1] = along * math.sin(bearing) + across * math.cos(bearing)
+            th[i, j, COL_STRENGTH] = g.uniform(r[_T_S], r[_T_S + 1])
+    ws = g.uniform(r[_T_WS], r[_T_WS + 1])
+    wd = g.uniform(-pi, pi)
+    wn = ws * math.cos(wd)
+    we = ws * math.sin(wd)
+    # the life cycle and fluctuation draws of _draw_time_dependence: each quantity as one vector
+    if has_life:
+        for j in range(k):
+            th[i, j, COL_DEATH] = g.uniform(r[_T_LIFE], r[_T_LIFE + 1])  # the lifetime, until the births
+        for j in range(k):
+            birth = g.uniform(r[_T_BIRTH], r[_T_BIRTH + 1])
+            th[i, j, COL_BIRTH] = birth
+            th[i, j, COL_DEATH] = birth + th[i, j, COL_DEATH]
+            th[i, j, COL_RISE] = r[_T_RISE]
+            th[i, j, COL_DECAY] = r[_T_RISE]
+    if has_amp:
+        for j in range(k):
+            th[i, j, COL_AMPLITUDE] = g.uniform(r[_T_AMP], r[_T_AMP + 1])
+        for j in range(k):
+            th[i, j, COL_OMEGA] = 2.0 * pi / g.uniform(r[_T_PERIOD], r[_T_PERIOD + 1])
+        for j in range(k):
+            th[i, j, COL_PHASE] = g.uniform(-pi, pi)
+    for j in range(k):  # as Thermal._row: dynamic unless steady, the peak w0 (1 + a)
+        th[i, j, COL_DYNAMIC] = 1.0 if has_life or th[i, j, COL_AMPLITUDE] != 0.0 else 0.0
+        th[i, j, COL_PEAK] = th[i, j, COL_STRENGTH] * (1.0 + th[i, j, COL_AMPLITUDE])
+    nth[i] = k
+    prm[i, :] = prm_t
+    if kind == _XC:
+        pad = r[_T_PAD]
+        prm[i, P_GN] = gn
+        prm[i, P_GE] = ge
+        prm[i, P_NMIN] = min(0.0, gn) - pad
+        prm[i, P_NMAX] = max(0.0, gn) + pad
+        prm[i, P_EMIN] = min(0.0, ge) - pad
+        prm[i, P_EMAX] = max(0.0, ge) + pad
+    prm[i, P_WN] = wn
+    prm[i, P_WE] = we
+    start[i, 0] = 0.0
+    start[i, 1] = 0.0
+    start[i, 2] = chi
+    start[i, 3] = h0
+
+
+@njit(cache=True)
+def _draw_task_each(rows, gens, kind, r, has_life, has_amp, drift, prm_t, th_t, prm, th, nth, start) -> None:
+    """Row ``i`` of ``rows`` from generator ``gens[i]`` (a typed List)."""
+    for i in rows:
+        _draw_task_row(gens[i], i, kind, r, has_life, has_amp, prm_t, th_t, prm, th, nth, start)
+        prm[i, P_DVX] = prm[i, P_WN] if drift else 0.0
+        prm[i, P_DVY] = prm[i, P_WE] if drift else 0.0
+
+
+class TaskSampler(_RowSampler):
+    """Task scenarios (thermal climb, cross-country) drawn into packed rows, many envs at once.
+
+    :param generator: :func:`~soaring_env.scenario.make_climb_scenario` or
+        :func:`~soaring_env.scenario.make_cross_country_scenario`.
+    :param kwargs: its keywords (validated as the generator validates them).
+
+    :meth:`draw_each` writes the rows :class:`ScenarioSampler` writes, but from exactly the
+    generator calls the Python generator makes: ``generator(rng, **kwargs)`` from the same state
+    gives the same :class:`Scenario`, whose ``scenario_params`` and ``field.packed`` are those rows.
+    """
+
+    def __init__(self, generator: Any, kwargs: Mapping[str, Any] | None = None) -> None:
+        self.generator = generator
+        self.kwargs = dict(kwargs or {})
+        self.settings = task_settings(generator, self.kwargs)
+        st = self.settings
+        # templates from a real scenario: the columns no draw changes, in the layouts of
+        # scenario_params and WindField.packed
+        one = generator(np.random.default_rng(0), **self.kwargs)
+        self._prm_t = scenario_params(one)
+        self._th_t = WindField(thermals=(Thermal(north=0.0, east=0.0),), model=st.model, zi=st.zi).packed[0].copy()
+        life = st.time is not None and st.time[0] is not None
+        amp = st.time is not None and st.time[3] is not None
+        kind = _CLIMB if st.kind == "climb" else _XC
+        self._args = (kind, _task_row(st), life, amp, st.drift, self._prm_t, self._th_t)
+
+    @property
+    def max_thermals(self) -> int:
+        """Most thermals a draw can have (the width a thermal table needs)."""
+        st = self.settings
+        if st.kind == "climb":
+            return st.n_thermals[1]
+        # round(rate * distance / 1 km) grows with both, so the highest of each bounds it
+        return min(int(round(st.thermals_per_km[1] * st.goal_distance[1] / 1000.0)) + 1, MAX_RANDOM_THERMALS)
+
+    def _draw_rows(
+        self,
+        rows: np.ndarray,
+        gens: Any,
+        params: np.ndarray,
+        thermals: np.ndarray,
+        n_thermals: np.ndarray,
+        start: np.ndarray,
+    ) -> None:
+        _draw_task_each(rows, gens, *self._args, params, thermals, n_thermals, start)
 
 
 def scenario_from_row(

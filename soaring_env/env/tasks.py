@@ -133,12 +133,11 @@ class _CrossCountry(SoaringBaseEnv):
         assert isinstance(cfg, CrossCountryConfig)
         return [*super()._terminal_terms(), ("battery_empty", BATTERY_EMPTY, -float(cfg.battery_penalty))]
 
-    def battery_budget(self, scenario: Scenario) -> float:
+    def battery_budget_at(self, goal_north: float, goal_east: float, start_north: float, start_east: float) -> float:
         """``battery_fraction`` x the motor energy [J/kg] of level best-L/D flight straight to the goal."""
         cfg = self.config
         assert isinstance(cfg, CrossCountryConfig)
-        g = scenario.require_goal()
-        distance = math.hypot(g.north - scenario.start[0], g.east - scenario.start[1])
+        distance = math.hypot(float(goal_north) - float(start_north), float(goal_east) - float(start_east))
         return cfg.battery_fraction * cfg.aircraft.cruise_energy(distance)
 
 

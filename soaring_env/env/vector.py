@@ -25,7 +25,7 @@ reads a per-env table of fields), so ``"random"`` scenarios cost no more than a 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar
 
 import numpy as np
@@ -45,9 +45,10 @@ from soaring_env.env._kernels import (
 )
 from soaring_env.env.config import SoaringEnvConfig, choose_scenario
 from soaring_env.env.core import SoaringBaseEnv, SoaringContinuousEnv, SoaringEnv
-from soaring_env.env.observation import N_PARAMS, P_WN, observe_batch, scenario_params, sensor_noise
+from soaring_env.env.observation import N_PARAMS, P_GE, P_GN, P_WN, observe_batch, scenario_params, sensor_noise
 from soaring_env.env.scenario_batch import (
     ScenarioSampler,
+    TaskSampler,
     batched_draws,
     generator_list,
     scenario_from_row,
@@ -56,7 +57,7 @@ from soaring_env.env.scenario_batch import (
 from soaring_env.model import BATTERY_EMPTY, OUTCOMES, SoaringModel
 from soaring_env.physics.thermals import PACKED_COLUMNS
 from soaring_env.primitives import N_PRIMITIVES
-from soaring_env.scenario import Scenario
+from soaring_env.scenario import TASK_GENERATORS, Scenario
 
 _OUTCOMES_OBJ = np.array(OUTCOMES, dtype=object)
 #: info keys of a step that a reset info does not have
@@ -189,6 +190,12 @@ class _SoaringVectorBase(VectorEnv):
         self._fixed_prm = scenario_params(fixed) if fixed is not None else None
         #: "random" draws in batches (goal reaching, distribution v2), else by the task's generator
         self._batched = batched_draws(tmpl.config.generator, tmpl.config.random_scenario)
+        #: a task's "random" draws, batched (the same scenarios as its generator, bit for bit)
+        self._task_sampler: TaskSampler | None = None
+        if fixed is None and tmpl.config.generator in TASK_GENERATORS:
+            self._task_sampler = TaskSampler(tmpl.config.generator, tmpl.config.random_scenario)
+        #: per env: its generator's state before its last task draw (to build that Scenario on demand)
+        self._draw_state: list[Mapping[str, Any] | None] = [None] * b
         if fixed is None and self._batched:
             self._ensure_slots(self._random_sampler().max_thermals)
         self._allowed = tmpl.model.allowed_primitives()
@@ -242,9 +249,17 @@ class _SoaringVectorBase(VectorEnv):
         after their reset (equal to what a single env would hold, and packing back bit for bit)."""
         lazy = np.flatnonzero(self._lazy)
         if lazy.size:
-            spec = self._random_sampler().spec
+            ts = self._task_sampler
             for i in lazy.tolist():
-                self._sc[i] = scenario_from_row(spec, self._prm[i], self._th[i, : self._nth[i]], self._start[i])
+                if ts is not None:  # the generator again, from its state before the draw
+                    rng = np.random.Generator(type(self._rng(i).bit_generator)())
+                    state = self._draw_state[i]
+                    assert state is not None  # set by every task draw
+                    rng.bit_generator.state = state
+                    self._sc[i] = ts.generator(rng, **ts.kwargs)
+                else:
+                    spec = self._random_sampler().spec
+                    self._sc[i] = scenario_from_row(spec, self._prm[i], self._th[i, : self._nth[i]], self._start[i])
             self._lazy[lazy] = False
         return self._sc.tolist()
 
@@ -279,6 +294,19 @@ class _SoaringVectorBase(VectorEnv):
         self._lazy[rows] = True  # their Scenario objects (in _sc) are stale until ``scenarios`` rebuilds them
         self._names[rows] = sampler.spec.name
 
+    def _draw_tasks(self, rows: np.ndarray) -> None:
+        """Draw new task scenarios for envs ``rows``, each from its own generator, in one call."""
+        sampler = self._task_sampler
+        assert sampler is not None
+        self._ensure_slots(sampler.max_thermals)
+        if self._gens is None:
+            self._gens = generator_list([self._rng(i) for i in range(self.num_envs)])
+        for i in rows.tolist():
+            self._draw_state[i] = self._rng(i).bit_generator.state
+        sampler.draw_each(rows, self._gens, self._prm, self._th, self._nth, self._start)
+        self._lazy[rows] = True
+        self._names[rows] = sampler.settings.name
+
     def _reset_rows(self, rows: np.ndarray, options: dict[str, Any] | None, obs: np.ndarray) -> None:
         """Start new episodes in envs ``rows`` and write their observations into ``obs``."""
         t = self.template
@@ -290,13 +318,18 @@ class _SoaringVectorBase(VectorEnv):
             sc = choose_scenario(options, fixed, cfg.random_scenario, cfg.generator)  # the same for every row
             if sc is None and self._batched:
                 self._draw(rows)
-            elif sc is None:  # a task's generator: one Scenario per row, from the row's generator
+            elif sc is None and self._task_sampler is not None:
+                self._draw_tasks(rows)
+            elif sc is None:  # another generator: one Scenario per row, from the row's generator
                 for i in rows.tolist():
                     self._put(np.array([i]), cfg.generator(self._rng(i), **dict(cfg.random_scenario)))
             else:
                 self._put(rows, sc)
-        if t.has_battery:  # task envs: every row's Scenario is built (no batched draws)
-            self.battery[rows] = [t.battery_budget(self._sc[i]) for i in rows.tolist()]
+        if t.has_battery:
+            self.battery[rows] = [
+                t.battery_budget_at(self._prm[i, P_GN], self._prm[i, P_GE], self._start[i, 0], self._start[i, 1])
+                for i in rows.tolist()
+            ]
         self.battery_left[rows] = self.battery[rows]
         self._history[rows] = 0.0
         if t._noise_sigma:  # after the scenario draws, as the single env draws its key
