@@ -583,21 +583,12 @@ def make_scenario(
     option on (a ConfigError otherwise, rather than being ignored).
     """
     check_type("rng", rng, np.random.Generator)
-    spec = RandomScenarioSpec(
-        n_thermals=n_thermals,
-        strength=strength,
-        wind_speed=wind_speed,
-        goal_distance=goal_distance,
-        height=height,
-        model=model,
-        zi=zi,
-        drift=drift,
-        bounds=bounds,
-        name=name,
-        lateral_spread=lateral_spread,
-        thermal_along=thermal_along,
-    )
-    time_kw = _check_time_options(lifecycle, rise_time, birth_window, strength_variation, variation_period)
+    s = _random_settings(
+        n_thermals, strength, wind_speed, goal_distance, height, model, zi, drift, bounds, name, lateral_spread,
+        thermal_along, lifecycle, rise_time, birth_window, strength_variation, variation_period,
+    )  # fmt: skip
+    spec, time_kw = s.spec, s.time
+    assert spec is not None  # the goal-reaching settings always hold their spec
     bounds = spec.domain
     n_thermals, strength, wind_speed = spec.n_thermals, spec.strength, spec.wind_speed
     goal_distance, height = spec.goal_distance, spec.height
@@ -658,6 +649,34 @@ def make_scenario(
             name=spec.name,
         )
     raise ConfigError(NO_FIT)
+
+
+def _random_settings(
+    n_thermals: Any, strength: Any, wind_speed: Any, goal_distance: Any, height: Any, model: Any, zi: Any,
+    drift: Any, bounds: Any, name: Any, lateral_spread: Any, thermal_along: Any, lifecycle: Any, rise_time: Any,
+    birth_window: Any, strength_variation: Any, variation_period: Any,
+) -> GeneratorSettings:  # fmt: skip
+    """The validated keywords of :func:`make_scenario` (a bad one raises a ConfigError naming it)."""
+    spec = RandomScenarioSpec(
+        n_thermals=n_thermals,
+        strength=strength,
+        wind_speed=wind_speed,
+        goal_distance=goal_distance,
+        height=height,
+        model=model,
+        zi=zi,
+        drift=drift,
+        bounds=bounds,
+        name=name,
+        lateral_spread=lateral_spread,
+        thermal_along=thermal_along,
+    )
+    time_kw = _check_time_options(lifecycle, rise_time, birth_window, strength_variation, variation_period)
+    return GeneratorSettings(
+        kind="random", height=spec.height, strength=spec.strength, wind_speed=spec.wind_speed, model=spec.model,
+        zi=spec.zi, drift=spec.drift, time=time_kw, name=spec.name, bounds=spec.domain, n_thermals=spec.n_thermals,
+        goal_distance=spec.goal_distance, spec=spec,
+    )  # fmt: skip
 
 
 _Range = tuple[float, float]
@@ -749,13 +768,16 @@ def _check_field_ranges(
     return n, st, ws, z, d
 
 
-class TaskSettings(NamedTuple):
-    """The validated keywords of a task generator, as its draws read them (:func:`task_settings`).
+class GeneratorSettings(NamedTuple):
+    """The validated keywords of a random-scenario generator, as its draws read them
+    (:func:`generator_settings`).
 
-    ``kind`` is ``"climb"`` (:func:`make_climb_scenario`: ``n_thermals``, ``thermal_radius`` [m] and
-    the fixed ``bounds``) or ``"xc"`` (:func:`make_cross_country_scenario`: ``goal_distance``,
+    ``kind`` is ``"random"`` (:func:`make_scenario`, distribution v1: ``spec``, its
+    :class:`RandomScenarioSpec`, with ``n_thermals``, ``goal_distance`` and the domain ``bounds``),
+    ``"climb"`` (:func:`make_climb_scenario`: ``n_thermals``, ``thermal_radius`` [m] and the fixed
+    ``bounds``) or ``"xc"`` (:func:`make_cross_country_scenario`: ``goal_distance``,
     ``thermals_per_km``, ``corridor``, ``margin``, ``goal_height``, ``height_max`` [m]); the fields
-    of the other kind keep their defaults. ``time`` holds the life-cycle and fluctuation options
+    of the other kinds keep their defaults. ``time`` holds the life-cycle and fluctuation options
     (lifetimes, rise time, birth window, amplitudes, periods), None when both are off.
     """
 
@@ -777,6 +799,7 @@ class TaskSettings(NamedTuple):
     margin: float = 0.0
     goal_height: float = 0.0
     height_max: float = 0.0
+    spec: RandomScenarioSpec | None = None
 
 
 #: Goal radius of the cross-country task [m].
@@ -843,7 +866,7 @@ def _climb_settings(
     n_thermals: Any, strength: Any, thermal_radius: Any, wind_speed: Any, height: Any, model: Any, zi: Any,
     drift: Any, half_width: Any, height_max: Any, lifecycle: Any, rise_time: Any, birth_window: Any,
     strength_variation: Any, variation_period: Any, name: Any,
-) -> TaskSettings:  # fmt: skip
+) -> GeneratorSettings:  # fmt: skip
     """The validated keywords of :func:`make_climb_scenario` (a bad one raises a ConfigError naming it)."""
     n_thermals, strength, wind_speed, zi, drift = _check_field_ranges(
         n_thermals, strength, wind_speed, model, zi, drift, name
@@ -855,7 +878,7 @@ def _climb_settings(
     height = check_pair("height", height, 0.0, bounds.height_max)
     if height[0] <= 0.0:
         raise ConfigError(f"height={height!r} must have low > 0 m (above the ground)")
-    return TaskSettings(
+    return GeneratorSettings(
         kind="climb", height=height, strength=strength, wind_speed=wind_speed, model=model, zi=zi, drift=drift,
         time=time_kw, name=name, bounds=bounds, n_thermals=n_thermals, thermal_radius=r_max,
     )  # fmt: skip
@@ -932,7 +955,7 @@ def _cross_country_settings(
     goal_distance: Any, thermals_per_km: Any, corridor: Any, strength: Any, wind_speed: Any, height: Any,
     goal_height: Any, model: Any, zi: Any, drift: Any, margin: Any, height_max: Any, lifecycle: Any,
     rise_time: Any, birth_window: Any, strength_variation: Any, variation_period: Any, name: Any,
-) -> TaskSettings:  # fmt: skip
+) -> GeneratorSettings:  # fmt: skip
     """The validated keywords of :func:`make_cross_country_scenario` (a bad one raises a ConfigError
     naming it)."""
     rate = check_pair("thermals_per_km", thermals_per_km, 0.0, 10.0)
@@ -948,21 +971,21 @@ def _cross_country_settings(
     if height[0] <= 0.0:
         raise ConfigError(f"height={height!r} must have low > 0 m (above the ground)")
     gh = check_range("goal_height", goal_height, 0.0, top, low_open=True)
-    return TaskSettings(
+    return GeneratorSettings(
         kind="xc", height=height, strength=strength, wind_speed=wind_speed, model=model, zi=zi, drift=drift,
         time=time_kw, name=name, goal_distance=dist_range, thermals_per_km=rate, corridor=width, margin=pad,
         goal_height=gh, height_max=top,
     )  # fmt: skip
 
 
-def task_settings(generator: Callable[..., Scenario], kwargs: Mapping[str, Any]) -> TaskSettings:
-    """The validated settings of a task generator (:func:`make_climb_scenario` or
-    :func:`make_cross_country_scenario`) called with ``kwargs`` (its defaults for the others): what its
-    draws read, for the batched draws of the envs. A bad keyword raises the generator's ConfigError."""
-    if generator not in _TASK_SETTINGS:
-        raise ConfigError(
-            f"generator={generator!r} is not a task generator; allowed: {sorted(g.__name__ for g in _TASK_SETTINGS)}"
-        )
+def generator_settings(generator: Callable[..., Scenario], kwargs: Mapping[str, Any]) -> GeneratorSettings:
+    """The validated settings of a random-scenario generator (:func:`make_scenario`,
+    :func:`make_climb_scenario` or :func:`make_cross_country_scenario`) called with ``kwargs`` (its
+    defaults for the others): what its draws read, for the batched draws of the envs. A bad keyword
+    raises the generator's ConfigError."""
+    if generator not in _GENERATOR_SETTINGS:
+        allowed = sorted(g.__name__ for g in _GENERATOR_SETTINGS)
+        raise ConfigError(f"generator={generator!r} has no batched draws; allowed: {allowed}")
     try:
         bound = inspect.signature(generator).bind(None, **dict(kwargs))
     except TypeError as err:
@@ -970,16 +993,17 @@ def task_settings(generator: Callable[..., Scenario], kwargs: Mapping[str, Any])
     bound.apply_defaults()
     args = dict(bound.arguments)
     args.pop("rng")
-    return _TASK_SETTINGS[generator](**args)
+    return _GENERATOR_SETTINGS[generator](**args)
 
 
-_TASK_SETTINGS: dict[Callable[..., Scenario], Callable[..., TaskSettings]] = {
+_GENERATOR_SETTINGS: dict[Callable[..., Scenario], Callable[..., GeneratorSettings]] = {
+    make_scenario: _random_settings,
     make_climb_scenario: _climb_settings,
     make_cross_country_scenario: _cross_country_settings,
 }
 
-#: The task generators, whose draws the envs can make in batches (:func:`task_settings`).
-TASK_GENERATORS = frozenset(_TASK_SETTINGS)
+#: The generators whose draws the envs can make in batches, exactly (:func:`generator_settings`).
+BATCHED_GENERATORS = frozenset(_GENERATOR_SETTINGS)
 
 #: The random-scenario generators by family: ``<family>-<seed>`` names and the envs' ``"random"``
 #: mode draw from them (goal reaching ``random``, thermal climb ``climb``, cross-country ``xc``).

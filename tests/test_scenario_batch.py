@@ -22,8 +22,8 @@ from soaring_env.env import ENV_ID
 from soaring_env.env.observation import P_GE, P_GH, P_GN, P_WE, P_WN, scenario_params
 from soaring_env.env.scenario_batch import (
     RANDOM_SCENARIO_VERSION,
+    GeneratorSampler,
     ScenarioSampler,
-    TaskSampler,
     draw_scenario_arrays,
     draw_width,
     generator_list,
@@ -352,7 +352,10 @@ def test_default_thermal_along_keeps_the_draws_bit_for_bit() -> None:
     assert make_scenario(np.random.default_rng(11)) == explicit
 
 
-TASK_CASES = [
+GEN_CASES = [
+    (make_scenario, {"lifecycle": (600.0, 1200.0), "birth_window": (-200.0, 100.0)}),
+    (make_scenario, {"strength_variation": (0.1, 0.3), "drift": True, "model": "gaussian", "n_thermals": (0, 8)}),
+    (make_scenario, {"bounds": Bounds(-1000.0, 1000.0, -1500.0, 1500.0, 800.0), "goal_distance": (1500.0, 2000.0)}),
     (make_climb_scenario, {}),
     (make_cross_country_scenario, {}),
     (make_climb_scenario, {"lifecycle": (600.0, 1200.0), "birth_window": (-300.0, 300.0)}),
@@ -373,12 +376,13 @@ TASK_CASES = [
 ]
 
 
-@pytest.mark.parametrize(("generator", "kw"), TASK_CASES)
-def test_task_draws_are_the_generators_scenarios_bit_for_bit(generator, kw: dict) -> None:
-    """A batched task draw makes exactly the generator's calls: the rows are those of the Scenario
-    the Python generator gives from the same state, and the generator ends in the same state."""
+@pytest.mark.parametrize(("generator", "kw"), GEN_CASES)
+def test_generator_draws_are_the_generators_scenarios_bit_for_bit(generator, kw: dict) -> None:
+    """A batched draw of a generator (goal reaching v1, climb, cross-country) makes exactly the
+    generator's calls: the rows are those of the Scenario the Python generator gives from the same
+    state (rejected tries included), and the generator ends in the same state."""
     n = 60
-    sampler = TaskSampler(generator, kw)
+    sampler = GeneratorSampler(generator, kw)
     gens = [np.random.default_rng(s) for s in range(n)]
     twins = [np.random.default_rng(s) for s in range(n)]
     prm = np.zeros((n, scenario_params(make_scenario(np.random.default_rng(0))).size))
@@ -396,14 +400,16 @@ def test_task_draws_are_the_generators_scenarios_bit_for_bit(generator, kw: dict
         assert gens[i].bit_generator.state == twins[i].bit_generator.state
 
 
-def test_task_sampler_input_is_checked() -> None:
-    with pytest.raises(ConfigError, match="not a task generator"):
-        TaskSampler(make_scenario, {})
+def test_generator_sampler_input_is_checked() -> None:
+    with pytest.raises(ConfigError, match="no batched draws"):
+        GeneratorSampler(get_scenario, {})
+    with pytest.raises(ConfigError, match="does not fit"):
+        GeneratorSampler(make_scenario, {"bounds": Bounds(0.0, 500.0, 0.0, 500.0, 800.0)})
     with pytest.raises(ConfigError, match="unexpected keyword"):
-        TaskSampler(make_climb_scenario, {"goal_distance": (1.0, 2.0)})
+        GeneratorSampler(make_climb_scenario, {"goal_distance": (1.0, 2.0)})
     with pytest.raises(ConfigError, match="corridor"):
-        TaskSampler(make_cross_country_scenario, {"corridor": -1.0})
-    sampler = TaskSampler(make_cross_country_scenario, {})
+        GeneratorSampler(make_cross_country_scenario, {"corridor": -1.0})
+    sampler = GeneratorSampler(make_cross_country_scenario, {})
     assert sampler.max_thermals == 31  # round(2 per km x 15 km) + 1
     small = np.zeros((1, 3, PACKED_COLUMNS))
     with pytest.raises(ConfigError, match="slots"):
@@ -421,7 +427,7 @@ def test_task_vector_env_draws_in_batches_and_builds_scenarios_on_demand(env_id:
     venv.reset(seed=30)
     for i, s in enumerate(singles):
         s.reset(seed=30 + i)
-    assert venv._task_sampler is not None and venv._lazy.all()
+    assert venv._gen_sampler is not None and venv._lazy.all()
     rng = np.random.default_rng(3)
     done = np.zeros(n, dtype=bool)
     resets = 0

@@ -260,7 +260,7 @@ def test_task_scenarios_are_reproducible_and_named() -> None:
         ("soaring/Soaring-v0", {"envelope": "fancy"}, "envelope"),
     ],
 )
-def test_bad_task_settings_are_explained(env_id: str, kwargs: dict, match: str) -> None:
+def test_bad_generator_settings_are_explained(env_id: str, kwargs: dict, match: str) -> None:
     with pytest.raises(ConfigError, match=match):
         gym.make(env_id, **kwargs)
 

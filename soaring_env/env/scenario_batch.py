@@ -19,7 +19,7 @@ Distribution versions (:data:`RANDOM_SCENARIO_VERSION`):
   of scenarios; but the generator's stream is used differently (each draw reads a fixed block of
   :func:`draw_width` uniforms), so a seed gives other scenarios than under v1.
 
-Task scenarios (thermal climb, cross-country) are drawn in batches too (:class:`TaskSampler`), but
+Task scenarios (thermal climb, cross-country) are drawn in batches too (:class:`GeneratorSampler`), but
 not as a new version: the kernel makes exactly the generator calls of
 :func:`~soaring_env.scenario.make_climb_scenario` / :func:`~soaring_env.scenario.make_cross_country_scenario`
 (numba's ``Generator`` methods are numpy's algorithms), so a generator state gives the same scenario
@@ -86,12 +86,12 @@ from soaring_env.scenario import (
     RANDOM_MARGIN,
     RANDOM_TRIES,
     TIME_OPTIONS,
+    GeneratorSettings,
     GoalRegion,
     RandomScenarioSpec,
     Scenario,
-    TaskSettings,
+    generator_settings,
     make_scenario,
-    task_settings,
 )
 
 #: The distribution of the envs' ``"random"`` mode: 2 = this module's batched draw (v1 =
@@ -112,9 +112,10 @@ _N_RANGE = 17
 
 
 def batched_draws(generator: Any, kwargs: Mapping[str, Any]) -> bool:
-    """Whether an env's ``"random"`` mode draws in batches here: goal reaching
+    """Whether an env's ``"random"`` mode draws distribution v2 here: goal reaching
     (:func:`~soaring_env.scenario.make_scenario`) with steady thermals. A task's generator, or the
-    thermal life-cycle and fluctuation options, draw one :class:`Scenario` at a time instead."""
+    thermal life-cycle and fluctuation options, draw their generator's own scenarios instead (the
+    native env in batches too: :class:`GeneratorSampler`)."""
     return generator is make_scenario and not (set(kwargs) & set(TIME_OPTIONS))
 
 
@@ -404,17 +405,19 @@ class ScenarioSampler(_RowSampler):
         return ScenarioBatch(spec=self.spec, params=params, thermals=thermals, n_thermals=counts, start=start)
 
 
-# --- task scenarios ------------------------------------------------------------------------------
-# Columns of a task draw's settings row (_task_row): both kinds, then climb, then cross-country.
+# --- the Python generators' own streams, batched ------------------------------------------------
+# Columns of a settings row (_settings_row): every kind, then climb, cross-country, goal reaching v1.
 _T_H, _T_S, _T_WS, _T_LIFE, _T_RISE, _T_BIRTH, _T_AMP, _T_PERIOD = 0, 2, 4, 6, 8, 9, 11, 13
 _T_NLO, _T_NHI, _T_RMAX = 15, 16, 17
 _T_GD, _T_RATE, _T_WIDTH, _T_PAD, _T_MAXK = 18, 20, 22, 23, 24
-_N_TASK = 25
-_CLIMB, _XC = 0, 1
+_T_NMIN, _T_NMAX, _T_EMIN, _T_EMAX, _T_HMAX, _T_LAT, _T_ALONG, _T_TRIES, _T_MARGIN = 25, 26, 27, 28, 29, 30, 31, 33, 34
+_N_SETTINGS = 35
+_RANDOM_V1, _CLIMB, _XC = 0, 1, 2
+_KINDS = {"random": _RANDOM_V1, "climb": _CLIMB, "xc": _XC}
 
 
-def _task_row(s: TaskSettings) -> np.ndarray:
-    row = np.zeros(_N_TASK)
+def _settings_row(s: GeneratorSettings) -> np.ndarray:
+    row = np.zeros(_N_SETTINGS)
     row[_T_H : _T_H + 2] = s.height
     row[_T_S : _T_S + 2] = s.strength
     row[_T_WS : _T_WS + 2] = s.wind_speed
@@ -434,12 +437,21 @@ def _task_row(s: TaskSettings) -> np.ndarray:
     row[_T_WIDTH] = s.corridor
     row[_T_PAD] = s.margin
     row[_T_MAXK] = MAX_RANDOM_THERMALS
+    if s.spec is not None:
+        b = s.spec.domain
+        row[_T_NMIN], row[_T_NMAX], row[_T_EMIN], row[_T_EMAX], row[_T_HMAX] = (
+            b.north_min, b.north_max, b.east_min, b.east_max, b.height_max,
+        )  # fmt: skip
+        row[_T_LAT] = s.spec.lateral_spread
+        row[_T_ALONG : _T_ALONG + 2] = s.spec.thermal_along
+    row[_T_TRIES] = RANDOM_TRIES
+    row[_T_MARGIN] = RANDOM_MARGIN
     row.setflags(write=False)
     return row
 
 
 @njit(cache=True)
-def _draw_task_row(
+def _draw_generated_row(
     g: Any,
     i: int,
     kind: int,
@@ -452,13 +464,53 @@ def _draw_task_row(
     th: np.ndarray,
     nth: np.ndarray,
     start: np.ndarray,
-) -> None:
-    """One task scenario from generator ``g`` into row ``i``: the calls of ``make_climb_scenario``
-    (``kind`` 0) or ``make_cross_country_scenario`` (1) on ``g``, in their order, with their
-    arithmetic (no fast-math: every value is the one the generator's Python computes)."""
+) -> bool:
+    """One scenario from generator ``g`` into row ``i``: the calls of ``make_scenario`` (``kind`` 0,
+    distribution v1), ``make_climb_scenario`` (1) or ``make_cross_country_scenario`` (2) on ``g``, in
+    their order, with their arithmetic (no fast-math: every value is the one the generator's Python
+    computes). False if goal reaching found no fit in its tries (``make_scenario`` raises then)."""
     pi = math.pi
-    gn = ge = 0.0
-    if kind == _CLIMB:
+    gn = ge = gh = sn = se = 0.0
+    k = 0
+    if kind == _RANDOM_V1:
+        nmin, nmax, emin, emax, hmax = r[_T_NMIN], r[_T_NMAX], r[_T_EMIN], r[_T_EMAX], r[_T_HMAX]
+        margin = r[_T_MARGIN]
+        lat = r[_T_LAT]
+        fit = False
+        for _ in range(int(r[_T_TRIES])):
+            dist = g.uniform(r[_T_GD], r[_T_GD + 1])
+            bearing = g.uniform(-pi, pi)
+            cn = 0.5 * (nmin + nmax)
+            ce = 0.5 * (emin + emax)
+            sn = cn - 0.5 * dist * math.cos(bearing) + g.uniform(-0.1, 0.1) * (nmax - nmin)
+            se = ce - 0.5 * dist * math.sin(bearing) + g.uniform(-0.1, 0.1) * (emax - emin)
+            gn = sn + dist * math.cos(bearing)
+            ge = se + dist * math.sin(bearing)
+            sh = g.uniform(r[_T_H], r[_T_H + 1])
+            gh = g.uniform(r[_T_H], r[_T_H + 1])
+            chi = bearing + g.uniform(-pi / 2, pi / 2)
+            chi = (chi + pi) % (2 * pi) - pi
+            k = g.integers(int(r[_T_NLO]), int(r[_T_NHI]) + 1)
+            for j in range(k):
+                along = g.uniform(r[_T_ALONG], r[_T_ALONG + 1])
+                across = g.uniform(-lat, lat) * dist
+                th[i, j, :] = th_t
+                th[i, j, 0] = sn + along * (gn - sn) - across * math.sin(bearing)
+                th[i, j, 1] = se + along * (ge - se) + across * math.cos(bearing)
+                th[i, j, COL_STRENGTH] = g.uniform(r[_T_S], r[_T_S + 1])
+            ws = g.uniform(r[_T_WS], r[_T_WS + 1])
+            wd = g.uniform(-pi, pi)
+            inside = (sn >= nmin and sn <= nmax and se >= emin and se <= emax and sh > 0.0 and sh <= hmax) and (
+                gn >= nmin and gn <= nmax and ge >= emin and ge <= emax and gh > 0.0 and gh <= hmax
+            )
+            edge = min(sn - nmin, nmax - sn, se - emin, emax - se, gn - nmin, nmax - gn, ge - emin, emax - ge)
+            if inside and not edge < margin:
+                fit = True
+                break
+        if not fit:
+            return False
+        h0 = sh
+    elif kind == _CLIMB:
         chi = g.uniform(-pi, pi)
         h0 = g.uniform(r[_T_H], r[_T_H + 1])
         k = g.integers(int(r[_T_NLO]), int(r[_T_NHI]) + 1)
@@ -469,6 +521,8 @@ def _draw_task_row(
             th[i, j, 0] = rad * math.cos(a)
             th[i, j, 1] = rad * math.sin(a)
             th[i, j, COL_STRENGTH] = g.uniform(r[_T_S], r[_T_S + 1])
+        ws = g.uniform(r[_T_WS], r[_T_WS + 1])
+        wd = g.uniform(-pi, pi)
     else:
         dist = g.uniform(r[_T_GD], r[_T_GD + 1])
         bearing = g.uniform(-pi, pi)
@@ -486,8 +540,8 @@ def _draw_task_row(
             th[i, j, 0] = along * math.cos(bearing) - across * math.sin(bearing)
             th[i, j, 1] = along * math.sin(bearing) + across * math.cos(bearing)
             th[i, j, COL_STRENGTH] = g.uniform(r[_T_S], r[_T_S + 1])
-    ws = g.uniform(r[_T_WS], r[_T_WS + 1])
-    wd = g.uniform(-pi, pi)
+        ws = g.uniform(r[_T_WS], r[_T_WS + 1])
+        wd = g.uniform(-pi, pi)
     wn = ws * math.cos(wd)
     we = ws * math.sin(wd)
     # the life cycle and fluctuation draws of _draw_time_dependence: each quantity as one vector
@@ -512,47 +566,57 @@ def _draw_task_row(
         th[i, j, COL_PEAK] = th[i, j, COL_STRENGTH] * (1.0 + th[i, j, COL_AMPLITUDE])
     nth[i] = k
     prm[i, :] = prm_t
-    if kind == _XC:
-        pad = r[_T_PAD]
+    if kind != _CLIMB:
         prm[i, P_GN] = gn
         prm[i, P_GE] = ge
+    if kind == _RANDOM_V1:
+        prm[i, P_GH] = gh
+    elif kind == _XC:
+        pad = r[_T_PAD]
         prm[i, P_NMIN] = min(0.0, gn) - pad
         prm[i, P_NMAX] = max(0.0, gn) + pad
         prm[i, P_EMIN] = min(0.0, ge) - pad
         prm[i, P_EMAX] = max(0.0, ge) + pad
     prm[i, P_WN] = wn
     prm[i, P_WE] = we
-    start[i, 0] = 0.0
-    start[i, 1] = 0.0
+    start[i, 0] = sn
+    start[i, 1] = se
     start[i, 2] = chi
     start[i, 3] = h0
+    return True
 
 
 @njit(cache=True)
-def _draw_task_each(rows, gens, kind, r, has_life, has_amp, drift, prm_t, th_t, prm, th, nth, start) -> None:
-    """Row ``i`` of ``rows`` from generator ``gens[i]`` (a typed List)."""
+def _draw_generated_each(rows, gens, kind, r, has_life, has_amp, drift, prm_t, th_t, prm, th, nth, start) -> int:
+    """Row ``i`` of ``rows`` from generator ``gens[i]`` (a typed List); -1, or the row that failed."""
     for i in rows:
-        _draw_task_row(gens[i], i, kind, r, has_life, has_amp, prm_t, th_t, prm, th, nth, start)
+        if not _draw_generated_row(gens[i], i, kind, r, has_life, has_amp, prm_t, th_t, prm, th, nth, start):
+            return i
         prm[i, P_DVX] = prm[i, P_WN] if drift else 0.0
         prm[i, P_DVY] = prm[i, P_WE] if drift else 0.0
+    return -1
 
 
-class TaskSampler(_RowSampler):
-    """Task scenarios (thermal climb, cross-country) drawn into packed rows, many envs at once.
+class GeneratorSampler(_RowSampler):
+    """Scenarios of a Python generator drawn into packed rows, many envs at once, bit for bit.
 
-    :param generator: :func:`~soaring_env.scenario.make_climb_scenario` or
-        :func:`~soaring_env.scenario.make_cross_country_scenario`.
+    :param generator: one of :data:`~soaring_env.scenario.BATCHED_GENERATORS`:
+        :func:`~soaring_env.scenario.make_climb_scenario`,
+        :func:`~soaring_env.scenario.make_cross_country_scenario`, or
+        :func:`~soaring_env.scenario.make_scenario` (distribution v1; the envs use it where v2 does
+        not apply: with the thermal life-cycle or fluctuation options).
     :param kwargs: its keywords (validated as the generator validates them).
 
     :meth:`draw_each` writes the rows :class:`ScenarioSampler` writes, but from exactly the
     generator calls the Python generator makes: ``generator(rng, **kwargs)`` from the same state
-    gives the same :class:`Scenario`, whose ``scenario_params`` and ``field.packed`` are those rows.
+    gives the same :class:`Scenario`, whose ``scenario_params`` and ``field.packed`` are those rows,
+    and leaves the generator in the same state.
     """
 
     def __init__(self, generator: Any, kwargs: Mapping[str, Any] | None = None) -> None:
         self.generator = generator
         self.kwargs = dict(kwargs or {})
-        self.settings = task_settings(generator, self.kwargs)
+        self.settings = generator_settings(generator, self.kwargs)
         st = self.settings
         # templates from a real scenario: the columns no draw changes, in the layouts of
         # scenario_params and WindField.packed
@@ -561,14 +625,13 @@ class TaskSampler(_RowSampler):
         self._th_t = WindField(thermals=(Thermal(north=0.0, east=0.0),), model=st.model, zi=st.zi).packed[0].copy()
         life = st.time is not None and st.time[0] is not None
         amp = st.time is not None and st.time[3] is not None
-        kind = _CLIMB if st.kind == "climb" else _XC
-        self._args = (kind, _task_row(st), life, amp, st.drift, self._prm_t, self._th_t)
+        self._args = (_KINDS[st.kind], _settings_row(st), life, amp, st.drift, self._prm_t, self._th_t)
 
     @property
     def max_thermals(self) -> int:
         """Most thermals a draw can have (the width a thermal table needs)."""
         st = self.settings
-        if st.kind == "climb":
+        if st.kind != "xc":
             return st.n_thermals[1]
         # round(rate * distance / 1 km) grows with both, so the highest of each bounds it
         return min(int(round(st.thermals_per_km[1] * st.goal_distance[1] / 1000.0)) + 1, MAX_RANDOM_THERMALS)
@@ -582,7 +645,8 @@ class TaskSampler(_RowSampler):
         n_thermals: np.ndarray,
         start: np.ndarray,
     ) -> None:
-        _draw_task_each(rows, gens, *self._args, params, thermals, n_thermals, start)
+        if _draw_generated_each(rows, gens, *self._args, params, thermals, n_thermals, start) >= 0:
+            raise ConfigError(NO_FIT)
 
 
 def scenario_from_row(

@@ -47,8 +47,8 @@ from soaring_env.env.config import SoaringEnvConfig, choose_scenario
 from soaring_env.env.core import SoaringBaseEnv, SoaringContinuousEnv, SoaringEnv
 from soaring_env.env.observation import N_PARAMS, P_GE, P_GN, P_WN, observe_batch, scenario_params, sensor_noise
 from soaring_env.env.scenario_batch import (
+    GeneratorSampler,
     ScenarioSampler,
-    TaskSampler,
     batched_draws,
     generator_list,
     scenario_from_row,
@@ -57,7 +57,7 @@ from soaring_env.env.scenario_batch import (
 from soaring_env.model import BATTERY_EMPTY, OUTCOMES, SoaringModel
 from soaring_env.physics.thermals import PACKED_COLUMNS
 from soaring_env.primitives import N_PRIMITIVES
-from soaring_env.scenario import TASK_GENERATORS, Scenario
+from soaring_env.scenario import BATCHED_GENERATORS, Scenario
 
 _OUTCOMES_OBJ = np.array(OUTCOMES, dtype=object)
 #: info keys of a step that a reset info does not have
@@ -190,11 +190,12 @@ class _SoaringVectorBase(VectorEnv):
         self._fixed_prm = scenario_params(fixed) if fixed is not None else None
         #: "random" draws in batches (goal reaching, distribution v2), else by the task's generator
         self._batched = batched_draws(tmpl.config.generator, tmpl.config.random_scenario)
-        #: a task's "random" draws, batched (the same scenarios as its generator, bit for bit)
-        self._task_sampler: TaskSampler | None = None
-        if fixed is None and tmpl.config.generator in TASK_GENERATORS:
-            self._task_sampler = TaskSampler(tmpl.config.generator, tmpl.config.random_scenario)
-        #: per env: its generator's state before its last task draw (to build that Scenario on demand)
+        #: the other "random" draws (tasks; goal reaching with thermal life cycles or fluctuations),
+        #: batched: the same scenarios as the generator, bit for bit
+        self._gen_sampler: GeneratorSampler | None = None
+        if fixed is None and not self._batched and tmpl.config.generator in BATCHED_GENERATORS:
+            self._gen_sampler = GeneratorSampler(tmpl.config.generator, tmpl.config.random_scenario)
+        #: per env: its generator's state before its last such draw (to build that Scenario on demand)
         self._draw_state: list[Mapping[str, Any] | None] = [None] * b
         if fixed is None and self._batched:
             self._ensure_slots(self._random_sampler().max_thermals)
@@ -249,7 +250,7 @@ class _SoaringVectorBase(VectorEnv):
         after their reset (equal to what a single env would hold, and packing back bit for bit)."""
         lazy = np.flatnonzero(self._lazy)
         if lazy.size:
-            ts = self._task_sampler
+            ts = self._gen_sampler
             for i in lazy.tolist():
                 if ts is not None:  # the generator again, from its state before the draw
                     rng = np.random.Generator(type(self._rng(i).bit_generator)())
@@ -294,9 +295,10 @@ class _SoaringVectorBase(VectorEnv):
         self._lazy[rows] = True  # their Scenario objects (in _sc) are stale until ``scenarios`` rebuilds them
         self._names[rows] = sampler.spec.name
 
-    def _draw_tasks(self, rows: np.ndarray) -> None:
-        """Draw new task scenarios for envs ``rows``, each from its own generator, in one call."""
-        sampler = self._task_sampler
+    def _draw_generated(self, rows: np.ndarray) -> None:
+        """Draw new scenarios for envs ``rows`` with the generator's own calls, each from its own
+        generator, in one call."""
+        sampler = self._gen_sampler
         assert sampler is not None
         self._ensure_slots(sampler.max_thermals)
         if self._gens is None:
@@ -318,8 +320,8 @@ class _SoaringVectorBase(VectorEnv):
             sc = choose_scenario(options, fixed, cfg.random_scenario, cfg.generator)  # the same for every row
             if sc is None and self._batched:
                 self._draw(rows)
-            elif sc is None and self._task_sampler is not None:
-                self._draw_tasks(rows)
+            elif sc is None and self._gen_sampler is not None:
+                self._draw_generated(rows)
             elif sc is None:  # another generator: one Scenario per row, from the row's generator
                 for i in rows.tolist():
                     self._put(np.array([i]), cfg.generator(self._rng(i), **dict(cfg.random_scenario)))
