@@ -19,12 +19,13 @@ Distribution versions (:data:`RANDOM_SCENARIO_VERSION`):
   of scenarios; but the generator's stream is used differently (each draw reads a fixed block of
   :func:`draw_width` uniforms), so a seed gives other scenarios than under v1.
 
-Task scenarios (thermal climb, cross-country) are drawn in batches too (:class:`GeneratorSampler`), but
+The other random modes -- the tasks (thermal climb, cross-country) and goal reaching with the thermal
+life-cycle or fluctuation options (v1) -- are drawn in batches too (:class:`GeneratorSampler`), but
 not as a new version: the kernel makes exactly the generator calls of
-:func:`~soaring_env.scenario.make_climb_scenario` / :func:`~soaring_env.scenario.make_cross_country_scenario`
-(numba's ``Generator`` methods are numpy's algorithms), so a generator state gives the same scenario
-either way, bit for bit, life cycles and fluctuations included, and the held-out ``climb-<seed>`` and
-``xc-<seed>`` sets need no versioning.
+:func:`~soaring_env.scenario.make_scenario`, :func:`~soaring_env.scenario.make_climb_scenario` or
+:func:`~soaring_env.scenario.make_cross_country_scenario` (numba's ``Generator`` methods are numpy's
+algorithms), so a generator state gives the same scenario either way, bit for bit, and the held-out
+``climb-<seed>`` and ``xc-<seed>`` sets need no versioning.
 
 Streams: a draw reads its uniforms straight from a numpy generator inside the kernel (exactly the
 numbers ``rng.random()`` would return, advancing that generator): each try reads
