@@ -188,7 +188,7 @@ class _SoaringVectorBase(VectorEnv):
         fixed = tmpl._fixed_scenario
         #: the configured scenario's packed rows, computed once
         self._fixed_prm = scenario_params(fixed) if fixed is not None else None
-        #: "random" draws in batches (goal reaching, distribution v2), else by the task's generator
+        #: "random" draws of distribution v2 (goal reaching with steady thermals); else _gen_sampler
         self._batched = batched_draws(tmpl.config.generator, tmpl.config.random_scenario)
         #: the other "random" draws (tasks; goal reaching with thermal life cycles or fluctuations),
         #: batched: the same scenarios as the generator, bit for bit
@@ -255,7 +255,7 @@ class _SoaringVectorBase(VectorEnv):
                 if ts is not None:  # the generator again, from its state before the draw
                     rng = np.random.Generator(type(self._rng(i).bit_generator)())
                     state = self._draw_state[i]
-                    assert state is not None  # set by every task draw
+                    assert state is not None  # set by every generated draw
                     rng.bit_generator.state = state
                     self._sc[i] = ts.generator(rng, **ts.kwargs)
                 else:
