@@ -986,6 +986,7 @@ def generator_settings(generator: Callable[..., Scenario], kwargs: Mapping[str, 
     if generator not in _GENERATOR_SETTINGS:
         allowed = sorted(g.__name__ for g in _GENERATOR_SETTINGS)
         raise ConfigError(f"generator={generator!r} has no batched draws; allowed: {allowed}")
+    check_type("kwargs", kwargs, Mapping, "a mapping of keyword arguments")
     try:
         bound = inspect.signature(generator).bind(None, **dict(kwargs))
     except TypeError as err:

@@ -407,6 +407,13 @@ def test_generator_sampler_input_is_checked() -> None:
         GeneratorSampler(make_scenario, {"bounds": Bounds(0.0, 500.0, 0.0, 500.0, 800.0)})
     with pytest.raises(ConfigError, match="unexpected keyword"):
         GeneratorSampler(make_climb_scenario, {"goal_distance": (1.0, 2.0)})
+    for bad in ("abc", [("height", (1.0, 2.0))]):
+        with pytest.raises(ConfigError, match="kwargs"):
+            GeneratorSampler(make_climb_scenario, bad)
+    with pytest.raises(ConfigError, match="keywords must be strings"):
+        GeneratorSampler(make_climb_scenario, {1: 2})
+    with pytest.raises(ConfigError, match="height"):
+        GeneratorSampler(make_climb_scenario, {"height": "low"})
     with pytest.raises(ConfigError, match="corridor"):
         GeneratorSampler(make_cross_country_scenario, {"corridor": -1.0})
     sampler = GeneratorSampler(make_cross_country_scenario, {})

@@ -333,9 +333,9 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         if not self.has_battery:
             return math.inf
         g = scenario.require_goal()
-        return self.battery_budget_at(g.north, g.east, scenario.start[0], scenario.start[1])
+        return self._battery_budget_at(g.north, g.east, scenario.start[0], scenario.start[1])
 
-    def battery_budget_at(self, goal_north: float, goal_east: float, start_north: float, start_east: float) -> float:
+    def _battery_budget_at(self, goal_north: float, goal_east: float, start_north: float, start_east: float) -> float:
         """:meth:`battery_budget` of a scenario with its goal centre and start at these positions [m]
         (what the budget depends on; the batched env reads them from its packed rows)."""
         return math.inf

@@ -616,8 +616,8 @@ class GeneratorSampler(_RowSampler):
 
     def __init__(self, generator: Any, kwargs: Mapping[str, Any] | None = None) -> None:
         self.generator = generator
+        self.settings = generator_settings(generator, {} if kwargs is None else kwargs)  # validates first
         self.kwargs = dict(kwargs or {})
-        self.settings = generator_settings(generator, self.kwargs)
         st = self.settings
         # templates from a real scenario: the columns no draw changes, in the layouts of
         # scenario_params and WindField.packed

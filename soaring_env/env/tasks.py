@@ -133,7 +133,7 @@ class _CrossCountry(SoaringBaseEnv):
         assert isinstance(cfg, CrossCountryConfig)
         return [*super()._terminal_terms(), ("battery_empty", BATTERY_EMPTY, -float(cfg.battery_penalty))]
 
-    def battery_budget_at(self, goal_north: float, goal_east: float, start_north: float, start_east: float) -> float:
+    def _battery_budget_at(self, goal_north: float, goal_east: float, start_north: float, start_east: float) -> float:
         """``battery_fraction`` x the motor energy [J/kg] of level best-L/D flight straight to the goal."""
         cfg = self.config
         assert isinstance(cfg, CrossCountryConfig)

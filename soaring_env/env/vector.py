@@ -329,7 +329,7 @@ class _SoaringVectorBase(VectorEnv):
                 self._put(rows, sc)
         if t.has_battery:
             self.battery[rows] = [
-                t.battery_budget_at(self._prm[i, P_GN], self._prm[i, P_GE], self._start[i, 0], self._start[i, 1])
+                t._battery_budget_at(self._prm[i, P_GN], self._prm[i, P_GE], self._start[i, 0], self._start[i, 1])
                 for i in rows.tolist()
             ]
         self.battery_left[rows] = self.battery[rows]
