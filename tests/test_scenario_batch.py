@@ -418,6 +418,11 @@ def test_generator_sampler_input_is_checked() -> None:
         GeneratorSampler(make_cross_country_scenario, {"corridor": -1.0})
     sampler = GeneratorSampler(make_cross_country_scenario, {})
     assert sampler.max_thermals == 31  # round(2 per km x 15 km) + 1
+    tables = (np.zeros((2, 15)), np.zeros((2, 31, PACKED_COLUMNS)), np.zeros(2, dtype=np.int64), np.zeros((2, 4)))
+    gens = generator_list([np.random.default_rng(0), np.random.default_rng(1)])
+    for bad in (np.array([2]), np.array([-1]), np.array([0.0]), [0]):
+        with pytest.raises(ConfigError, match="rows"):
+            sampler.draw_each(bad, gens, *tables)  # no write outside the tables
     small = np.zeros((1, 3, PACKED_COLUMNS))
     with pytest.raises(ConfigError, match="slots"):
         sampler.draw_each(np.zeros(1, dtype=np.int64), generator_list([np.random.default_rng(0)]), *(

@@ -324,6 +324,14 @@ class _RowSampler:
         if thermals.shape[1] < self.max_thermals:
             raise ConfigError(f"thermal table has {thermals.shape[1]} slots; draws need {self.max_thermals}")
 
+    @staticmethod
+    def _check_rows(rows: np.ndarray, n: int) -> None:
+        """The kernels index without bounds checks: every row must name a row of every table."""
+        if not (isinstance(rows, np.ndarray) and rows.dtype == np.int64 and rows.ndim == 1):
+            raise ConfigError(f"rows must be a 1-D int64 array; got {type(rows).__name__} {getattr(rows, 'dtype', '')}")
+        if rows.size and (rows.min() < 0 or rows.max() >= n):
+            raise ConfigError(f"rows must lie in 0..{n - 1} (the tables' and generators' rows)")
+
     def draw_each(
         self,
         rows: np.ndarray,
@@ -335,6 +343,7 @@ class _RowSampler:
     ) -> None:
         """Draw row ``i`` of ``rows`` (int64) from ``gens[i]`` (a :func:`generator_list`), all in one call."""
         self._check_slots(thermals)
+        self._check_rows(rows, min(len(gens), params.shape[0], thermals.shape[0], n_thermals.shape[0], start.shape[0]))
         self._draw_rows(rows, gens, params, thermals, n_thermals, start)
 
 
@@ -391,6 +400,7 @@ class ScenarioSampler(_RowSampler):
         """Draw the rows ``rows`` (int64) in order, all from ``rng``."""
         check_type("rng", rng, np.random.Generator)
         self._check_slots(thermals)
+        self._check_rows(rows, min(params.shape[0], thermals.shape[0], n_thermals.shape[0], start.shape[0]))
         failed = _draw_from(rows, rng, *self._args, params, thermals, n_thermals, start)
         if failed >= 0:
             raise ConfigError(NO_FIT)
