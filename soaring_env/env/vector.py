@@ -251,16 +251,17 @@ class _SoaringVectorBase(VectorEnv):
         lazy = np.flatnonzero(self._lazy)
         if lazy.size:
             ts = self._gen_sampler
+            spec = self._random_sampler().spec if ts is None else None  # lazy rows come from one sampler
             for i in lazy.tolist():
-                if ts is not None:  # the generator again, from its state before the draw
-                    rng = np.random.Generator(type(self._rng(i).bit_generator)())
-                    state = self._draw_state[i]
-                    assert state is not None  # set by every generated draw
-                    rng.bit_generator.state = state
-                    self._sc[i] = ts.generator(rng, **ts.kwargs)
-                else:
-                    spec = self._random_sampler().spec
+                if spec is not None:
                     self._sc[i] = scenario_from_row(spec, self._prm[i], self._th[i, : self._nth[i]], self._start[i])
+                    continue
+                assert ts is not None
+                rng = np.random.Generator(type(self._rng(i).bit_generator)())  # the generator again, from
+                state = self._draw_state[i]  # its state before the draw (set by every generated draw)
+                assert state is not None
+                rng.bit_generator.state = state
+                self._sc[i] = ts.generator(rng, **ts.kwargs)
             self._lazy[lazy] = False
         return self._sc.tolist()
 
