@@ -34,7 +34,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from baselines.reference import ReferenceConfig, load_references
+from baselines.reference import ReferenceConfig, ScenarioReference, load_references
 from baselines.reference.tasks import goal_config
 from soaring_env._validation import ConfigError, check_int, check_positive
 from soaring_env.scenario import Scenario
@@ -108,15 +108,7 @@ def demonstrations(
     :raises ConfigError: no usable plan, or a plan that does not reach the goal when replayed.
     """
     visit_weight = check_positive("visit_weight", visit_weight)
-    refs = load_references(reference_dir)
-    if not refs:
-        raise ConfigError(f"demos={str(reference_dir)!r}: no reference files there (run scripts/reference.py)")
-    chosen = sorted(refs) if names is None else list(names)
-    if match is not None:
-        pattern = demo_pattern(match)
-        chosen = [n for n in chosen if pattern.fullmatch(n)]
-        if not chosen:
-            raise ConfigError(f"demo_match={match!r}: no scenario in {str(reference_dir)!r} matches it")
+    refs, chosen = _chosen(reference_dir, names, match)
     obs_rows: list[np.ndarray] = []
     act_rows: list[Any] = []
     ret_rows: list[np.ndarray] = []
@@ -125,8 +117,6 @@ def demonstrations(
     used: list[str] = []
     costs: list[float] = []
     for name in chosen:
-        if name not in refs:
-            raise ConfigError(f"demos: no reference file for scenario {name!r} in {str(reference_dir)!r}")
         ref = refs[name].samplers.get(sampler)
         if ref is None or not math.isfinite(ref.best_cost) or not ref.actions:
             continue
@@ -185,6 +175,94 @@ def demonstrations(
         plan_costs=tuple(costs),
         weights=np.concatenate(w_rows),
     )
+
+
+def _chosen(
+    reference_dir: str | Path, names: Sequence[str] | None, match: str | None
+) -> tuple[dict[str, ScenarioReference], list[str]]:
+    """The reference files of ``reference_dir`` and the names :func:`demonstrations` uses."""
+    refs = load_references(reference_dir)
+    if not refs:
+        raise ConfigError(f"demos={str(reference_dir)!r}: no reference files there (run scripts/reference.py)")
+    chosen = sorted(refs) if names is None else list(names)
+    if match is not None:
+        pattern = demo_pattern(match)
+        chosen = [n for n in chosen if pattern.fullmatch(n)]
+        if not chosen:
+            raise ConfigError(f"demo_match={match!r}: no scenario in {str(reference_dir)!r} matches it")
+    for name in chosen:
+        if name not in refs:
+            raise ConfigError(f"demos: no reference file for scenario {name!r} in {str(reference_dir)!r}")
+    return refs, chosen
+
+
+def demo_plans(
+    reference_dir: str | Path, *, sampler: str, match: str | None = None
+) -> list[tuple[Scenario, tuple[Any, ...]]]:
+    """The ``sampler`` plans of ``reference_dir`` as ``(scenario, env actions)`` pairs, sorted by
+    scenario name (``match`` as for :func:`demonstrations`): the starts of :class:`DemoStarts`."""
+    refs, chosen = _chosen(reference_dir, None, match)
+    out: list[tuple[Scenario, tuple[Any, ...]]] = []
+    for name in chosen:
+        ref = refs[name].samplers.get(sampler)
+        if ref is None or not math.isfinite(ref.best_cost) or not ref.actions:
+            continue
+        acts = tuple(int(a) if sampler == "primitive" else np.asarray(a, np.float32) for a in ref.actions)
+        out.append((refs[name].scenario, acts))
+    if not out:
+        raise ConfigError(f"demos={str(reference_dir)!r}: no {sampler} plan")
+    return out
+
+
+class DemoStarts(gym.Wrapper):  # type: ignore[type-arg]
+    """Start a share of the episodes part-way along a reference plan (a reverse curriculum).
+
+    PPO explores from the start of an episode, so a thermal that pays only after the detour, the
+    climb and the glide on have all been flown is rarely found; a policy cloned from the plans
+    drifts, and fine-tuning from the scenario start alone unlearns the circling (README, "PPO that
+    soars toward a goal"). Starting episodes at the states the plans pass through -- on the way to
+    a thermal, in it at every height, on the final glide -- lets PPO practise each stage where the
+    plans reach it, and its critic learns what those states are worth, which then shows at the
+    start as the advantage of heading for the lift (Florensa et al. 2017, reverse curriculum
+    generation; Salimans & Chen 2018, learning from a single demonstration).
+
+    At a reset without a ``scenario`` option, with probability ``fraction`` a plan is drawn
+    uniformly and a step ``k`` uniformly from ``0 .. len(plan) - 1``; the env is reset into the
+    plan's scenario and its first ``k`` actions are flown (the episode's clock and step count run
+    on from there: the time limit is the plan's); otherwise the env draws its own scenario. The
+    draws use a generator of this wrapper, seeded by the first seeded reset: same seed, same starts.
+    A start on a plan returns the info of its last flown step with ``scenario`` (the plan's name)
+    and ``demo_step`` (``k``) added.
+    Wrap the raw env (the plans hold env actions), under the policy's observation and action
+    transforms.
+
+    :param plans: ``(scenario, env actions)`` pairs (:func:`demo_plans`).
+    :param fraction: share of the resets that start on a plan, in [0, 1].
+    """
+
+    def __init__(self, env: gym.Env, plans: Sequence[tuple[Scenario, Sequence[Any]]], fraction: float) -> None:
+        super().__init__(env)
+        if isinstance(fraction, bool) or not isinstance(fraction, (int, float)) or not 0.0 <= fraction <= 1.0:
+            raise ConfigError(f"demo_starts={fraction!r} must be a number in [0, 1]")
+        if fraction > 0.0 and not plans:
+            raise ConfigError("demo_starts > 0 needs at least one plan")
+        self.plans = list(plans)
+        self.fraction = float(fraction)
+        self._rng = np.random.default_rng(0)
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        if seed is not None:
+            self._rng = np.random.default_rng([int(seed), 0x5EED])
+        if (options and "scenario" in options) or not self._rng.random() < self.fraction:
+            return self.env.reset(seed=seed, options=options)
+        scenario, actions = self.plans[int(self._rng.integers(len(self.plans)))]
+        k = int(self._rng.integers(len(actions)))
+        obs, info = self.env.reset(seed=seed, options={**(options or {}), "scenario": scenario})
+        for a in actions[:k]:
+            obs, _, terminated, truncated, info = self.env.step(a)
+            if terminated or truncated:  # a plan of other dynamics: fly this one from its start
+                return self.env.reset(options={**(options or {}), "scenario": scenario})
+        return obs, {**info, "scenario": scenario.name, "demo_step": k}
 
 
 def demo_pattern(match: str) -> re.Pattern[str]:

@@ -158,6 +158,11 @@ class TrainConfig:
     :param demo_rehearsal: with ``demos``: after every PPO update, this many minibatches of the
         demonstrations are fitted again (the actor's log-likelihood, with PPO's own optimizer), so
         that PPO improves on the cloned policy without forgetting it (0: PPO alone).
+    :param demo_starts: with ``demos``: the share of the training resets that start part-way along
+        one of their plans instead of at a random scenario's start (:class:`baselines.imitation.DemoStarts`:
+        a plan and a step drawn uniformly, the plan flown to that step), so that PPO practises the
+        climb and the glide on where the plans fly them. 0 (default): every episode from its start.
+        Needs ``vec_env="dummy"`` or ``"subproc"`` (the wrapper wraps single envs).
     :param eval_freq: evaluate every this many total timesteps.
     :param n_eval_scenarios: validation scenarios per evaluation (one episode each).
     :param checkpoint_freq: save a checkpoint every this many total timesteps (0: never).
@@ -199,6 +204,7 @@ class TrainConfig:
     demo_epochs: int = 200
     demo_learning_rate: float = 1e-3
     demo_rehearsal: int = 0
+    demo_starts: float = 0.0
     eval_freq: int = 25_000
     n_eval_scenarios: int = 40
     checkpoint_freq: int = 500_000
@@ -255,6 +261,14 @@ class TrainConfig:
             raise ValueError(f"demo_rehearsal={self.demo_rehearsal!r} must be an integer >= 0")
         if self.demo_rehearsal and self.demos is None:
             raise ValueError("demo_rehearsal needs demos")
+        f = self.demo_starts
+        if isinstance(f, bool) or not isinstance(f, (int, float)) or not 0.0 <= f <= 1.0:
+            raise ValueError(f"demo_starts={f!r} must be a number in [0, 1]")
+        object.__setattr__(self, "demo_starts", float(f))
+        if f > 0.0 and self.demos is None:
+            raise ValueError("demo_starts needs demos")
+        if f > 0.0 and self.vec_env == "native":
+            raise ValueError("demo_starts needs vec_env='dummy' or 'subproc' (DemoStarts wraps single envs)")
         w = self.demo_visit_weight
         if isinstance(w, bool) or not isinstance(w, (int, float)) or not 0.0 < w < math.inf:
             raise ValueError(f"demo_visit_weight={w!r} must be a finite number > 0")
@@ -719,16 +733,23 @@ def make_train_env(
     turn_exponent: float = 1.0,
     grid: bool = False,
     final_glide: bool = False,
+    demo_plans: Sequence[tuple[Scenario, Sequence[Any]]] = (),
+    demo_starts: float = 0.0,
 ) -> gym.Env:
     """One training env: random scenario at every reset, optional extra goal shaping and
     body-frame observations (``grid``: :class:`ControlGridAction`; else the turn curve;
-    ``final_glide``: the :class:`FinalGlide` margin appended).
+    ``final_glide``: the :class:`FinalGlide` margin appended; ``demo_starts``: that share of the
+    episodes starts part-way along one of ``demo_plans``, :class:`baselines.imitation.DemoStarts`).
 
     Module-level (picklable) so that ``SubprocVecEnv`` workers can build it.
     """
     import soaring_env  # noqa: F401  (registers the env ids in this process)
 
     env = gym.make(_module_qualified(env_id), scenario="random", **dict(env_kwargs or {}))
+    if demo_starts:
+        from baselines.imitation import DemoStarts
+
+        env = DemoStarts(env, demo_plans, demo_starts)
     if shaping:
         env = GoalDistanceShaping(env, weight=shaping, gamma=gamma)
     return _wrap_policy_io(env, body_frame, turn_exponent, grid, final_glide)
@@ -1149,6 +1170,16 @@ def _clone_demos(model: Any, config: TrainConfig, out: Path) -> tuple[dict[str, 
     }, demos
 
 
+def _demo_start_plans(config: TrainConfig) -> list[tuple[Scenario, tuple[Any, ...]]]:
+    """The plans :class:`baselines.imitation.DemoStarts` starts on (none without ``demo_starts``)."""
+    if not config.demo_starts:
+        return []
+    from baselines.imitation import demo_plans
+
+    sampler = "continuous" if config.algo in CONTINUOUS_ALGOS else "primitive"
+    return demo_plans(str(config.demos), sampler=sampler, match=config.demo_match)
+
+
 def _init_model_path(init_from: str) -> Path:
     """The ``.zip`` of ``init_from`` (a run directory's ``model.zip``, or the file itself)."""
     p = Path(init_from)
@@ -1213,6 +1244,8 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
                     "turn_exponent": config.turn_exponent,
                     "grid": grid,
                     "final_glide": config.final_glide,
+                    "demo_plans": _demo_start_plans(config),
+                    "demo_starts": config.demo_starts,
                 },
             )
         scenarios = validation_scenarios(

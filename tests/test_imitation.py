@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 pytest.importorskip("stable_baselines3")
 
 import soaring_env  # noqa: F401  (registers the envs)
-from baselines.imitation import demonstrations, pretrain
+from baselines.imitation import DemoStarts, demo_plans, demonstrations, pretrain
 from baselines.ppo import (
     CONTINUOUS_ID,
     DISCRETE_ID,
@@ -498,6 +498,73 @@ def test_rehearsal_without_a_cloning_pass(ref_dir: Path, tmp_path: Path) -> None
     out = train(_tiny_run("grid", ref_dir, demo_epochs=0, demo_rehearsal=2, net_arch=(32, 32)), tmp_path / "run")
     bc = json.loads((out / "config.json").read_text())["behaviour_cloning"]
     assert bc["first_epoch"] is None and bc["last_epoch"] is None and bc["plans"] == len(SCENARIOS)
+
+
+@pytest.mark.parametrize(("sampler", "env_id"), [("primitive", DISCRETE_ID), ("continuous", CONTINUOUS_ID)])
+def test_demo_starts_fly_the_plans_to_the_drawn_step(ref_dir: Path, sampler: str, env_id: str) -> None:
+    """A demo start is the state the plan's first k steps reach (the same observation, time and
+    step count as flying them by hand); the other resets are the env's own; same seed, same starts."""
+    plans = demo_plans(ref_dir, sampler=sampler)
+    assert [sc.name for sc, _ in plans] == [sc.name for sc in SCENARIOS]
+
+    def starts(fraction: float, seed: int) -> list[tuple[np.ndarray, dict]]:
+        env = DemoStarts(gym.make(env_id, scenario="random"), plans, fraction)
+        out = [env.reset(seed=seed)] + [env.reset() for _ in range(30)]
+        env.close()
+        return out
+
+    got = starts(0.5, 7)
+    assert all(np.array_equal(a[0], b[0]) for a, b in zip(got, starts(0.5, 7), strict=True))
+    on_plan = 0
+    for obs, info in got:
+        match = [(sc, acts) for sc, acts in plans if sc.name == info["scenario"]]
+        if not match:
+            continue
+        on_plan += 1
+        sc, acts = match[0]
+        k = info.get("demo_step", 0)
+        assert 0 <= k < len(acts) and info["time"] == k * _duration(env_id)
+        ref = gym.make(env_id, scenario=sc)
+        want, _ = ref.reset(seed=0)
+        for a in acts[:k]:
+            want, *_ = ref.step(a)
+        assert np.array_equal(obs, want)
+        ref.close()
+    assert 5 <= on_plan <= 26  # about half of 31
+    never = DemoStarts(gym.make(env_id, scenario="random"), plans, 0.0)
+    raw = gym.make(env_id, scenario="random")
+    assert np.array_equal(never.reset(seed=3)[0], raw.reset(seed=3)[0])
+    assert np.array_equal(never.reset()[0], raw.reset()[0])
+    for bad in (-0.1, 1.5, True, "0.5", float("nan")):
+        with pytest.raises(ConfigError, match="demo_starts"):
+            DemoStarts(raw, plans, bad)  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="matches"):
+        demo_plans(ref_dir, sampler=sampler, match="nothing-\\d+")
+
+
+def _duration(env_id: str) -> float:
+    """The env's control interval [s] (one step)."""
+    env = gym.make(env_id)
+    duration = float(env.unwrapped.config.duration)
+    env.close()
+    return duration
+
+
+def test_train_with_demo_starts(ref_dir: Path, tmp_path: Path) -> None:
+    """A run whose episodes start on the plans half of the time trains and records the share; the
+    setting needs demos and single envs."""
+    out = train(
+        _tiny_run("grid", ref_dir, demo_epochs=1, demo_starts=0.5, vec_env="dummy", net_arch=(32, 32)),
+        tmp_path / "run",
+    )
+    assert json.loads((out / "config.json").read_text())["config"]["demo_starts"] == 0.5
+    with pytest.raises(ValueError, match="demo_starts needs demos"):
+        TrainConfig(demo_starts=0.5, vec_env="dummy")
+    with pytest.raises(ValueError, match="demo_starts needs vec_env"):
+        TrainConfig(demos=str(ref_dir), demo_starts=0.5)
+    for bad in (-0.5, 2.0, True, "x"):
+        with pytest.raises(ValueError, match="demo_starts"):
+            TrainConfig(demos=str(ref_dir), demo_starts=bad, vec_env="dummy")
 
 
 #: A small cross-country problem: a thermal on the way to a goal 4 km off (a glide reaches it too).
