@@ -246,12 +246,17 @@ class DemoStarts(gym.Wrapper):  # type: ignore[type-arg]
             raise ConfigError(f"demo_starts={fraction!r} must be a number in [0, 1]")
         if fraction > 0.0 and not plans:
             raise ConfigError("demo_starts > 0 needs at least one plan")
+        for scenario, actions in plans:
+            if not isinstance(scenario, Scenario) or len(actions) == 0:
+                raise ConfigError(f"plans: {scenario!r} needs a Scenario and at least one action")
         self.plans = list(plans)
         self.fraction = float(fraction)
         self._rng = np.random.default_rng(0)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         if seed is not None:
+            if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+                raise ConfigError(f"seed={seed!r} must be an integer >= 0 or None")
             self._rng = np.random.default_rng([int(seed), 0x5EED])
         if (options and "scenario" in options) or not self._rng.random() < self.fraction:
             return self.env.reset(seed=seed, options=options)

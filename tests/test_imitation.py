@@ -538,6 +538,10 @@ def test_demo_starts_fly_the_plans_to_the_drawn_step(ref_dir: Path, sampler: str
     for bad in (-0.1, 1.5, True, "0.5", float("nan")):
         with pytest.raises(ConfigError, match="demo_starts"):
             DemoStarts(raw, plans, bad)  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="at least one action"):
+        DemoStarts(raw, [(plans[0][0], ())], 0.5)
+    with pytest.raises(ConfigError, match="seed"):
+        DemoStarts(raw, plans, 0.5).reset(seed=-1)
     with pytest.raises(ConfigError, match="matches"):
         demo_plans(ref_dir, sampler=sampler, match="nothing-\\d+")
 
