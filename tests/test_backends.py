@@ -108,6 +108,19 @@ def test_script_backend_options(
     assert f"error: {message}" in err, err
 
 
+@pytest.mark.parametrize(
+    ("key", "flag"), [("seed", "--seed/--seeds"), ("algo", "--algo"), ("max_minutes", "--minutes")]
+)
+def test_train_ppo_refuses_set_of_a_field_with_its_own_flag(
+    key: str, flag: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--set seed=1`` would be replaced by ``--seed``'s default without a word: it is refused."""
+    with pytest.raises(SystemExit) as exc:
+        _script("train_ppo").main(["--set", f"{key}=1", "--out", str(tmp_path)])
+    assert exc.value.code == 2
+    assert f"--set {key}=...: set it with {flag}" in capsys.readouterr().err
+
+
 def test_run_jobs_in_process_and_on_local_workers() -> None:
     jobs = [5, 3, 7, 1]
     serial = list(run_jobs(math.factorial, jobs, workers=1))

@@ -149,7 +149,11 @@ def main(argv: list[str] | None = None) -> int:
             overrides[name] = val
     if args.tensorboard:
         overrides["tensorboard"] = True
-    overrides.update(_parse_set(args.set))
+    settings = _parse_set(args.set)
+    for key, flag in (("seed", "--seed/--seeds"), ("algo", "--algo"), ("max_minutes", "--minutes")):
+        if key in settings:  # the flag's value would replace it without a word
+            p.error(f"--set {key}=...: set it with {flag}")
+    overrides.update(settings)
     try:  # check the settings here, before any job starts
         for algo in algos:
             TrainConfig(algo=algo, **overrides)
