@@ -41,6 +41,7 @@ import numpy as np
 
 from baselines._runs import holds_dir_lock, progress_bar, read_json
 from baselines.backends import check_backend, run_jobs
+from baselines.reference.bounds import regret
 from baselines.reference.yardstick import ScenarioReference
 from soaring_env._validation import ConfigError
 from soaring_env.scenario import HELDOUT_SEED0 as HELDOUT_SEED0
@@ -572,8 +573,20 @@ def bootstrap_ci(
         return math.nan, math.nan, math.nan
     rng = np.random.default_rng(seed)
     boots = np.array([stat(v[rng.integers(0, v.size, v.size)]) for _ in range(n_boot)])
-    lo, hi = np.percentile(boots, [2.5, 97.5])
+    if np.all(np.isfinite(boots)):
+        lo, hi = np.percentile(boots, [2.5, 97.5])
+    else:  # infinite values (failures counted as unbounded regret): order statistics, no inf - inf
+        lo, hi = np.percentile(boots, [2.5, 97.5], method="nearest")
     return float(stat(v)), float(lo), float(hi)
+
+
+def _regret_defined(results: Mapping[str, Any], ep: Mapping[str, Any]) -> bool:
+    """Whether the episode's scenario has a reference for its action set with a defined regret
+    (``results["meta"]["reference"]``, written by :func:`attach_regret`), success or not."""
+    ref = results.get("meta", {}).get("reference", {}).get(ep["scenario"], {}).get(action_set(ep["env_id"]))
+    if ref is None:
+        return False
+    return not math.isnan(regret(float(ref["best_cost"]), float(ref["best_cost"]), float(ref["direct_cost"])))
 
 
 def summarize(results: Mapping[str, Any], reference: str = REFERENCE_AGENT) -> list[dict[str, Any]]:
@@ -594,6 +607,9 @@ def summarize(results: Mapping[str, Any], reference: str = REFERENCE_AGENT) -> l
         c_ref, _, _ = _stats(r["energy_spent"] for _, r in common)
         t_mean, t_std, _ = _stats(e["flight_time"] for e in ok)
         reg = [e["regret"] for e in ok if e.get("regret") is not None]
+        # every scored episode, a failure as unbounded regret: the median over successes alone
+        # flatters an agent that fails where soaring is hard
+        reg_all = [e["regret"] if e["success"] else math.inf for e in mine if _regret_defined(results, e)]
         rows.append(
             {
                 "agent": a,
@@ -614,6 +630,8 @@ def summarize(results: Mapping[str, Any], reference: str = REFERENCE_AGENT) -> l
                 "regret_n": len(reg),
                 "regret_median": bootstrap_ci(reg, np.median),
                 "regret_mean": bootstrap_ci(reg, np.mean),
+                "regret_all_n": len(reg_all),
+                "regret_all_median": bootstrap_ci(reg_all, np.median),
                 "circling_in_lift": median_circling(mine),
             }
         )
@@ -644,9 +662,10 @@ def markdown_table(results: Mapping[str, Any], reference: str = REFERENCE_AGENT)
     rows = summarize(results, reference)
     head = (
         "| agent | success | energy, successes [kJ/kg] | energy on common successes [kJ/kg] "
-        f"| × {reference} | regret, median [95 % CI] | regret, mean [95 % CI] | thermal benefit captured (median) "
+        f"| × {reference} | regret, median [95 % CI] | regret, mean [95 % CI] "
+        "| regret, median of all episodes (failure = inf) [95 % CI] | thermal benefit captured (median) "
         "| circling in lift (median) | flight time [s] | compute / decision [ms] | compute / episode [s] |\n"
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n"
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n"
     )
     lines = []
     for r in rows:
@@ -655,7 +674,7 @@ def markdown_table(results: Mapping[str, Any], reference: str = REFERENCE_AGENT)
             f"| {_f(r['energy_mean'] / 1000, '.2f')} ± {_f(r['energy_std'] / 1000, '.2f')} "
             f"| {_f(r['energy_common'] / 1000, '.2f')} vs {_f(r['energy_common_ref'] / 1000, '.2f')} (n={r['common']}) "
             f"| {_f(r['energy_ratio'], '.2f')} "
-            f"| {_ci(r['regret_median'])} | {_ci(r['regret_mean'])} "
+            f"| {_ci(r['regret_median'])} | {_ci(r['regret_mean'])} | {_ci(r['regret_all_median'])} "
             f"| {_pct(1 - r['regret_median'][0])} | {_pct(r['circling_in_lift'])} "
             f"| {_f(r['flight_time_mean'], '.0f')} ± {_f(r['flight_time_std'], '.0f')} "
             f"| {_f(1000 * r['compute_per_decision_s'], '.3g')} | {_f(r['compute_total_s'], '.3g')} |"
@@ -663,8 +682,14 @@ def markdown_table(results: Mapping[str, Any], reference: str = REFERENCE_AGENT)
     return head + "\n".join(lines) + "\n"
 
 
-def write_report(results: Mapping[str, Any], out_dir: str | Path, reference: str = REFERENCE_AGENT) -> list[Path]:
-    """Write ``results.md`` (table + settings) and the plots; returns the files written."""
+def write_report(
+    results: Mapping[str, Any],
+    out_dir: str | Path,
+    reference: str = REFERENCE_AGENT,
+    reference_dir: str | Path = "results/reference",
+) -> list[Path]:
+    """Write ``results.md`` (table + settings) and the plots; returns the files written.
+    ``reference_dir``: where the regrets' reference files came from (named in the text)."""
     out = Path(out_dir)
     meta = results["meta"]
     cfg = meta.get("config", {})
@@ -676,8 +701,9 @@ def write_report(results: Mapping[str, Any], out_dir: str | Path, reference: str
         "Energy = net specific energy spent (fuel + potential + kinetic) [kJ/kg], mean ± sd over successful "
         f"episodes; 'common' = (scenario, seed) pairs solved by both the agent and {reference}, "
         "× = ratio of those means. Regret r = (E - E_best) / (E_direct - E_best) per successful episode against "
-        "the reference search of its scenario and action set (results/reference/; 0 = best known plan, "
-        "1 = no better than ignoring the thermals); thermal benefit captured = 1 - r. Circling in lift: the fraction "
+        f"the reference search of its scenario and action set ({Path(reference_dir).as_posix()}/; 0 = best known plan, "
+        "1 = no better than ignoring the thermals); thermal benefit captured = 1 - r; the median of all episodes "
+        "counts a failed one as unbounded regret (inf). Circling in lift: the fraction "
         "of the flight time turning at >= 6 deg/s (a circle a minute) where the updraft is >= 0.2 m/s. SST knows the "
         "thermal field; compute time includes SST's planning.\n"
     )

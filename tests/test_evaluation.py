@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -307,6 +308,18 @@ def test_every_episode_carries_its_regret(tmp_path: Path) -> None:
     assert h["regret_median"][0] == pytest.approx(float(np.median(regs)))
     assert h["regret_median"][1] <= h["regret_median"][0] <= h["regret_median"][2]
     assert "regret, median [95 % CI]" in markdown_table(res)
+    # the median of all episodes counts a failure as unbounded regret (every scenario has a reference)
+    for agent, row in rows.items():
+        mine = [e for e in res["episodes"] if e["agent"] == agent]
+        allr = [e["regret"] if e["success"] else math.inf for e in mine]
+        assert row["regret_all_n"] == len(mine)
+        assert row["regret_all_median"][0] == float(np.median(allr))
+        lo, mid, hi = row["regret_all_median"][1], row["regret_all_median"][0], row["regret_all_median"][2]
+        assert not math.isnan(lo) and not math.isnan(hi) and lo <= mid <= hi
+    assert any(not e["success"] for e in res["episodes"] if e["agent"] == "random")
+    assert "median of all episodes (failure = inf)" in markdown_table(res)
+    ci = bootstrap_ci([0.1, 0.2, math.inf, math.inf, math.inf], np.median)
+    assert ci[0] == math.inf and ci[1] <= ci[2] and not any(math.isnan(x) for x in ci)
     # a reference made for another scenario is not used
     other = {n: ScenarioReference(resolve_scenario("random-5"), r.lower_bound, r.samplers) for n, r in refs.items()}
     assert all(e["regret"] is None for e in attach_regret(res, other)["episodes"])

@@ -718,3 +718,104 @@ def test_cross_country_dagger_plans_from_the_visited_state_with_its_battery(tmp_
             demonstrations(tmp_path, xc_env, sampler="continuous", gamma=0.99, visit_weight=bad)
     with pytest.raises(ConfigError, match="prefix: the episode ends"):
         task_reference(xc, sc, beam_width=16, prefix=[level] * 400)
+
+
+#: Goal reaching at Ts = 10 s on the physical envelope (the cross-country ids' control interval).
+TS10 = {"duration": 10.0, "envelope": "physical", "n_points": 10, "max_steps": 60}
+
+
+def test_goal_reaching_at_ts10_plans_and_clones_in_its_own_env(tmp_path: Path) -> None:
+    """On the physical envelope the goal env's own search uses the tasks' grid with a powered climb
+    (the yardstick's 10 m/s controls lie outside it); its plans record the env keywords they were
+    made in, replay there to the recorded energy bit for bit, clone into the grid policy, and a
+    folder made with other keywords is planned again rather than mixed."""
+    from baselines.ppo import control_grid, grid_index
+    from baselines.reference import control_set
+    from baselines.reference.runner import run_references
+    from baselines.reference.tasks import (
+        GOAL_PHYSICAL_GAMMAS_DEG,
+        XC_PROGRESS_WEIGHT,
+        XC_SPEEDS,
+        XC_TURNS_DEG,
+        reference_config,
+        task_reference,
+    )
+
+    env = gym.make(CONTINUOUS_ID, **TS10)
+    cfg = reference_config(env, 16)
+    assert isinstance(cfg, ReferenceConfig)
+    assert (cfg.speeds, cfg.turns_deg, cfg.gammas_deg) == (XC_SPEEDS, XC_TURNS_DEG, GOAL_PHYSICAL_GAMMAS_DEG)
+    assert cfg.progress_weight == XC_PROGRESS_WEIGHT and cfg.max_edges == TS10["max_steps"]
+    table = control_grid(env)
+    assert len(table) == 4 * 7 * 3  # airspeeds x course changes x (level, 10-degree climb, zero-thrust glide)
+    assert np.array_equal(table, control_set(env.unwrapped.model, "continuous", cfg))
+    paper = reference_config(gym.make(CONTINUOUS_ID), 16)  # the default envelope keeps the yardstick's grid
+    assert isinstance(paper, ReferenceConfig) and paper.speeds == ReferenceConfig().speeds
+
+    sc = SCENARIOS[0]
+    plan = task_reference(CONTINUOUS_ID, sc, beam_width=16, env_kwargs=TS10).samplers["continuous"]
+    assert plan.env_kwargs == TS10 and math.isfinite(plan.best_cost) and plan.flight_time == 10.0 * len(plan.actions)
+    env.reset(seed=0, options={"scenario": sc})
+    info: dict = {}
+    for a in plan.actions:
+        *_, info = env.step(np.asarray(a, np.float32))
+    assert info["is_success"] and env.unwrapped.energy_spent == plan.best_cost
+
+    out = tmp_path / "ts10"
+    runs = {"samplers": ("continuous",), "config": cfg, "progress": False, "env_id": CONTINUOUS_ID}
+    refs = run_references([sc], out, env_kwargs=TS10, **runs)
+    got = refs[sc.name].samplers["continuous"]  # the file holds the plan and its keywords
+    assert (got.actions, got.best_cost, got.env_kwargs) == (plan.actions, plan.best_cost, TS10)
+    stamp = (out / f"{sc.name}.json").stat().st_mtime_ns
+    run_references([sc], out, env_kwargs=TS10, **runs)
+    assert (out / f"{sc.name}.json").stat().st_mtime_ns == stamp  # resumed
+    other = {**TS10, "max_steps": 50}
+    again = run_references([sc], out, env_kwargs=other, **runs)[sc.name].samplers["continuous"]
+    assert again.env_kwargs == other  # other keywords: planned again, not taken for done
+    with pytest.raises(ConfigError, match="env_kwargs need env_id"):
+        run_references([sc], tmp_path / "x", samplers=("continuous",), env_kwargs=TS10, progress=False)
+    run_references([sc], out, env_kwargs=TS10, **runs)
+    demos = demonstrations(
+        out,
+        lambda s: make_eval_env(CONTINUOUS_ID, [s], TS10, True, 1.0, True),
+        sampler="continuous",
+        gamma=0.99,
+        to_policy_action=lambda a: grid_index(table, a),
+    )
+    assert np.array_equal(table[demos.actions], np.asarray(plan.actions, np.float32))
+
+
+def test_demos_cli_env_kwargs(ref_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--env-kwargs``: the goal env's own search in the env they make, recorded in every file;
+    bad JSON, a non-object, a scenario among them, unknown keywords and a DAgger run flown in
+    another env are usage errors naming the flag or field."""
+    from baselines.cli.demos import main
+
+    common = ["--scenarios", "1", "--beam-width", "8", "--workers", "1", "--no-progress"]
+    out = tmp_path / "ts10"
+    assert main([*common, "--env-kwargs", json.dumps(TS10), "--out", str(out)]) == 0
+    plan = load_reference(out / "random-20000.json").samplers["continuous"]
+    assert plan.env_kwargs == TS10 and math.isnan(plan.direct_cost) and plan.settings["max_edges"] == 60
+    # a DAgger round of a run flown at Ts = 10 s plans in that env (the env's own search, prefixes)
+    run10 = train(_tiny_run("grid", out, demo_epochs=1, env_kwargs=TS10), tmp_path / "run10")
+    dagger = ["--dagger", str(run10), "--every", "3", "--until", "6", "--tag", "r1"]
+    assert main([*common, *dagger, "--out", str(out)]) == 0
+    starts = sorted(out.glob("random-20000-r1s*.json"))
+    assert [p.stem for p in starts] == ["random-20000-r1s3", "random-20000-r1s6"]
+    for path in starts:
+        plan = load_reference(path).samplers["continuous"]
+        assert plan.demo_from == int(path.stem.rsplit("s", 1)[1]) and plan.env_kwargs == TS10
+    run = train(_tiny_run("grid", ref_dir, demo_epochs=1), tmp_path / "run")  # flown in the default env
+    for bad, field in (
+        ("{", "--env-kwargs"),
+        ("[1, 2]", "--env-kwargs"),
+        ('{"scenario": "paper"}', "--env-kwargs"),
+        ('{"durationx": 10}', "durationx"),
+        ('{"duration": -1}', "duration"),
+    ):
+        with pytest.raises(SystemExit) as exc:
+            main([*common, "--env-kwargs", bad, "--out", str(tmp_path / "bad")])
+        assert exc.value.code == 2 and field in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        main([*common, "--env-kwargs", json.dumps(TS10), "--dagger", str(run), "--out", str(tmp_path / "d")])
+    assert exc.value.code == 2 and "flew with" in capsys.readouterr().err

@@ -13,6 +13,9 @@ the states a trained policy visits.
     python scripts/demos.py --task xc --scenarios 200 --out results/reference-train-xc
     # goal reaching with a time weight [J/kg per s]: the goal env's own search (DAgger keeps prefixes)
     python scripts/demos.py --scenarios 200 --time-weight 1 --out results/reference-train-goal-t1
+    # goal reaching at Ts = 10 s on the physical envelope: the goal env's own search in that env
+    python scripts/demos.py --scenarios 600 --out results/reference-train-ts10 \
+        --env-kwargs '{"duration": 10, "envelope": "physical", "n_points": 10, "max_steps": 120, "time_limit": 1200}'
 
 Then ``python scripts/train_ppo.py --algo grid --set 'demos="results/reference-train"'`` clones the
 plans into a policy before PPO (:mod:`baselines.imitation`). One JSON per plan, written atomically
@@ -27,9 +30,11 @@ policy had there (``demo_from`` marks where the imitated part begins).
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import time
 from pathlib import Path
+from typing import Any
 
 from baselines._runs import add_backend_args, check_cli_args, cli_workers
 from baselines.evaluation import PPO_MODELS
@@ -82,6 +87,14 @@ def main(argv: list[str] | None = None) -> int:
         "--failed-only", action="store_true", help="with --dagger: only states of episodes that miss the goal"
     )
     p.add_argument("--tag", default="", help="with --dagger: marks the round in the names (<name>-<tag>s<k>)")
+    p.add_argument(
+        "--env-kwargs",
+        default=None,
+        metavar="JSON",
+        help="the task env's gym.make keywords, a JSON object (the env's own search; default: the id's "
+        "defaults, or with --dagger the run's), e.g. goal reaching at Ts = 10 s: "
+        '\'{"duration": 10, "envelope": "physical", "n_points": 10, "max_steps": 120, "time_limit": 1200}\'',
+    )
     p.add_argument("--out", type=Path, default=Path("results/reference-train"), help="output directory")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_backend_args(p, "one per CPU core")
@@ -91,18 +104,21 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"--first={args.first} must be >= 0")
     if not args.tag.isalnum() and args.tag != "":
         p.error(f"--tag={args.tag!r}: letters and digits only")
+    env_kwargs = _env_kwargs(p, args.env_kwargs)
     try:
         task_id, family, tw, floor = DEMO_TASKS[args.task]
         tw = tw if args.time_weight is None else args.time_weight
         floor = floor if args.min_height is None else args.min_height
         env_id: str | None = None
-        if args.task == "goal" and not tw and not floor:  # the yardstick's search, as published
+        if args.dagger is not None:  # plans for a run's states are made in the env it flew
+            env_kwargs = _run_env_kwargs(args.dagger, args.ppo_model, env_kwargs)
+        if args.task == "goal" and not tw and not floor and not env_kwargs:  # the yardstick's search, as published
             cfg = demo_reference_config(args.beam_width)
         else:
             import gymnasium as gym
 
             env_id = {"continuous": task_id, "primitive": task_id.replace("Continuous", "")}[args.sampler]
-            probe = gym.make(env_id)
+            probe = gym.make(env_id, **(env_kwargs or {}))
             task_cfg = reference_config(probe, args.beam_width, tw, floor)
             probe.close()
             assert isinstance(task_cfg, ReferenceConfig)
@@ -129,6 +145,7 @@ def main(argv: list[str] | None = None) -> int:
             address=args.address,
             env_id=env_id,
             prefixes=prefixes,
+            env_kwargs=env_kwargs,
         )
     except ConfigError as exc:
         p.error(str(exc))
@@ -138,6 +155,35 @@ def main(argv: list[str] | None = None) -> int:
     atomic_write_text(args.out / "table.md", reference_table(everything, [args.sampler]) + "\n")
     print(f"{len(refs)} plans in {time.perf_counter() - t0:.0f} s; {len(everything)} in {args.out} (table.md)")
     return 0
+
+
+def _env_kwargs(p: argparse.ArgumentParser, text: str | None) -> dict[str, Any] | None:
+    """``--env-kwargs`` as a dict (None: not given); bad JSON or a non-object is a usage error."""
+    if text is None:
+        return None
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as exc:
+        p.error(f"--env-kwargs={text!r} is not JSON ({exc.msg}); a JSON object of gym.make keywords is required")
+    if not isinstance(value, dict) or "scenario" in value:
+        p.error(f"--env-kwargs={text!r}: a JSON object of gym.make keywords (no 'scenario': --scenarios) is required")
+    return value
+
+
+def _run_env_kwargs(run: str, which: str, given: dict[str, Any] | None) -> dict[str, Any]:
+    """The env keywords a DAgger round plans in: those the run flew with (its ``config.json``,
+    reward-only keywords left out; none: the yardstick's search where the task allows it, as
+    before), and ``--env-kwargs`` given too must say the same."""
+    from baselines.evaluation import REWARD_ONLY_KWARGS, ppo_env_kwargs, ppo_model_path
+
+    path = ppo_model_path(run, which)
+    cfg_path = path.parent / "config.json"
+    if not cfg_path.is_file():
+        raise ConfigError(f"--dagger={run!r}: no config.json beside {path}")
+    own = ppo_env_kwargs(json.loads(cfg_path.read_text()))
+    if given is not None and {k: v for k, v in given.items() if k not in REWARD_ONLY_KWARGS} != own:
+        raise ConfigError(f"--env-kwargs={given!r}: the run {run} flew with {own!r}; the plans must be made in its env")
+    return own
 
 
 def _dagger_starts(args: argparse.Namespace, scenarios: list, task: bool) -> tuple[list, dict[str, list]]:

@@ -109,7 +109,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.rescore:
             results = attach_regret(load_results(args.out), references)
             atomic_write_text(Path(args.out) / "results.json", json.dumps(results, separators=(",", ":")))
-            files = write_report(results, args.out)
+            files = write_report(results, args.out, reference_dir=args.reference_dir)
             print(markdown_table(results))
             print("rescored:", ", ".join(str(f) for f in [Path(args.out) / "results.json", *files]))
             return 0
@@ -139,7 +139,7 @@ def main(argv: list[str] | None = None) -> int:
         p.print_usage(sys.stderr)  # argparse's usual usage + "error:" lines; status 2 as returned value
         print(f"{p.prog}: error: {exc}", file=sys.stderr)
         return 2
-    files = write_report(results, args.out)
+    files = write_report(results, args.out, reference_dir=args.reference_dir)
     print()
     print(markdown_table(results))
     print("written:", ", ".join(str(f) for f in [Path(args.out) / "results.json", *files]))

@@ -34,9 +34,11 @@ from soaring_env.scenario import Scenario
 
 
 def _job(
-    args: tuple[dict[str, Any], tuple[str, ...], dict[str, Any], str | None, list[Any], dict[str, Any] | None],
+    args: tuple[
+        dict[str, Any], tuple[str, ...], dict[str, Any], str | None, list[Any], dict[str, Any] | None, dict[str, Any]
+    ],
 ) -> ScenarioReference:
-    sc_dict, samplers, cfg_dict, env_id, prefix, stored = args
+    sc_dict, samplers, cfg_dict, env_id, prefix, stored, env_kwargs = args
     if stored is not None:  # a finished reference that only lacks the polish
         old = ScenarioReference.from_dict(stored)
         model = SoaringModel(scenario=old.scenario)
@@ -46,7 +48,7 @@ def _job(
     if env_id is not None:  # a task's own search (its control set, battery and time limit)
         sc = Scenario.from_dict(sc_dict)
         width, tw, floor = int(cfg_dict["beam_width"]), float(cfg_dict["time_weight"]), float(cfg_dict["min_height"])
-        return task_reference(env_id, sc, width, prefix, tw, floor)
+        return task_reference(env_id, sc, width, prefix, tw, floor, env_kwargs)
     return compute_reference(Scenario.from_dict(sc_dict), samplers, ReferenceConfig(**cfg_dict))
 
 
@@ -59,8 +61,10 @@ def _save(ref: ScenarioReference, path: Path) -> None:
     save_reference(ref, path)
 
 
-def _status(path: Path, scenario: Scenario, samplers: Sequence[str], cfg: ReferenceConfig) -> str:
-    """``"done"``: a finished file for the same scenario, samplers and settings; ``"polish"``: one
+def _status(
+    path: Path, scenario: Scenario, samplers: Sequence[str], cfg: ReferenceConfig, env_kwargs: Mapping[str, Any]
+) -> str:
+    """``"done"``: a finished file for the same scenario, samplers, settings and env keywords; ``"polish"``: one
     that differs from them only in being polished less deep (it is polished, not recomputed: the
     search before the polish is deterministic); ``"todo"`` otherwise (corrupt files raise, naming it)."""
     if not path.exists():
@@ -70,7 +74,7 @@ def _status(path: Path, scenario: Scenario, samplers: Sequence[str], cfg: Refere
         return "todo"
     status = "done"
     for s in samplers:
-        if s not in ref.samplers:
+        if s not in ref.samplers or ref.samplers[s].env_kwargs != dict(env_kwargs):
             return "todo"
         # settings read back through ReferenceConfig: a file from before a new field holds its default
         have, want = ReferenceConfig(**ref.samplers[s].settings), sampler_config(cfg, s)
@@ -95,6 +99,7 @@ def run_references(
     address: str | None = None,
     env_id: str | None = None,
     prefixes: Mapping[str, Sequence[Any]] | None = None,
+    env_kwargs: Mapping[str, Any] | None = None,
 ) -> dict[str, ScenarioReference]:
     """Compute (or load, if already done with the same settings) the reference of every scenario.
 
@@ -112,12 +117,17 @@ def run_references(
         :func:`~baselines.reference.tasks.reference_config`) instead of the yardstick's.
     :param prefixes: with ``env_id``: by scenario name, env actions flown before the search plans
         (DAgger starts, :func:`baselines.imitation.visited_prefixes`).
+    :param env_kwargs: with ``env_id``: ``gym.make`` keywords of the task env (recorded per file;
+        a file made with other keywords is done again).
     :returns: the references by scenario name, in the order given.
     """
     cfg = config if config is not None else ReferenceConfig()
     if not isinstance(cfg, ReferenceConfig):
         raise ConfigError(f"config={cfg!r} must be a ReferenceConfig")
     check_backend(backend, workers, address)
+    kwargs = dict(env_kwargs or {})
+    if kwargs and env_id is None:
+        raise ConfigError("env_kwargs need env_id (a task's own reference search)")
     if not all(isinstance(s, Scenario) for s in scenarios):
         raise ConfigError("scenarios must be soaring_env.scenario.Scenario objects")
     names = [s.name for s in scenarios]
@@ -126,7 +136,8 @@ def run_references(
     out = Path(out_dir)
     with DirLock(out, "reference run"):  # refuses a file; creates the folder
         status = {
-            s.name: "todo" if fresh else _status(reference_path(out, s.name), s, samplers, cfg) for s in scenarios
+            s.name: "todo" if fresh else _status(reference_path(out, s.name), s, samplers, cfg, kwargs)
+            for s in scenarios
         }
         if env_id is not None:  # a task's reference is never polished: its files are either done or not
             status = {k: "done" if v == "done" else "todo" for k, v in status.items()}
@@ -147,6 +158,7 @@ def run_references(
                     env_id,
                     [np.asarray(a).tolist() for a in pre.get(s.name, ())],
                     load_reference(reference_path(out, s.name)).to_dict() if status[s.name] == "polish" else None,
+                    kwargs,
                 )
                 for s in todo
             ]

@@ -54,6 +54,8 @@ class SamplerReference:
     :param seconds: wall-clock time of both searches [s].
     :param demo_from: the first step of ``actions`` that is the search's: a plan from a state a
         policy visited (DAgger) starts with the policy's own steps, flown to reach that state.
+    :param env_kwargs: a task's own search: the ``gym.make`` keywords of the env it planned in
+        (its control interval, envelope, step limit; empty: the id's defaults), which a replay needs.
     """
 
     best_cost: float
@@ -65,6 +67,7 @@ class SamplerReference:
     rollouts: int
     seconds: float
     demo_from: int = 0
+    env_kwargs: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     def regret(self, cost: float) -> float:
         return regret(cost, self.best_cost, self.direct_cost)
