@@ -772,6 +772,11 @@ def test_goal_reaching_at_ts10_plans_and_clones_in_its_own_env(tmp_path: Path) -
     other = {**TS10, "max_steps": 50}
     again = run_references([sc], out, env_kwargs=other, **runs)[sc.name].samplers["continuous"]
     assert again.env_kwargs == other  # other keywords: planned again, not taken for done
+    for bad in ("duration=10", [("duration", 10.0)]):
+        with pytest.raises(ConfigError, match="env_kwargs"):
+            task_reference(CONTINUOUS_ID, sc, beam_width=16, env_kwargs=bad)  # type: ignore[arg-type]
+        with pytest.raises(ConfigError, match="env_kwargs"):
+            run_references([sc], tmp_path / "y", env_kwargs=bad, **runs)  # type: ignore[arg-type]
     with pytest.raises(ConfigError, match="env_kwargs need env_id"):
         run_references([sc], tmp_path / "x", samplers=("continuous",), env_kwargs=TS10, progress=False)
     run_references([sc], out, env_kwargs=TS10, **runs)

@@ -36,7 +36,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from baselines._runs import add_backend_args, check_cli_args, cli_workers
+from baselines._runs import add_backend_args, check_cli_args, cli_workers, read_json
 from baselines.evaluation import PPO_MODELS
 from baselines.imitation import DEMO_SEED0, demo_reference_config, visited_starts
 from baselines.reference import ReferenceConfig
@@ -180,7 +180,7 @@ def _run_env_kwargs(run: str, which: str, given: dict[str, Any] | None) -> dict[
     cfg_path = path.parent / "config.json"
     if not cfg_path.is_file():
         raise ConfigError(f"--dagger={run!r}: no config.json beside {path}")
-    own = ppo_env_kwargs(json.loads(cfg_path.read_text()))
+    own = ppo_env_kwargs(read_json(cfg_path, "--dagger run record"))
     if given is not None and {k: v for k, v in given.items() if k not in REWARD_ONLY_KWARGS} != own:
         raise ConfigError(f"--env-kwargs={given!r}: the run {run} flew with {own!r}; the plans must be made in its env")
     return own

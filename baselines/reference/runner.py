@@ -125,6 +125,8 @@ def run_references(
     if not isinstance(cfg, ReferenceConfig):
         raise ConfigError(f"config={cfg!r} must be a ReferenceConfig")
     check_backend(backend, workers, address)
+    if env_kwargs is not None and not isinstance(env_kwargs, Mapping):
+        raise ConfigError(f"env_kwargs={env_kwargs!r} must be a mapping of gym.make keywords or None")
     kwargs = dict(env_kwargs or {})
     if kwargs and env_id is None:
         raise ConfigError("env_kwargs need env_id (a task's own reference search)")

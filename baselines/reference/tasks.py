@@ -20,7 +20,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -170,7 +170,7 @@ def task_reference(
     prefix: Sequence[Any] = (),
     time_weight: float = 0.0,
     min_height: float = 0.0,
-    env_kwargs: dict[str, Any] | None = None,
+    env_kwargs: Mapping[str, Any] | None = None,
 ) -> ScenarioReference:
     """The reference plan of a goal task (``env_id``, e.g. the cross-country's) in ``scenario``, as
     the content of a reference file: the env's action set only, its ``best_cost`` the energy the
@@ -192,6 +192,8 @@ def task_reference(
         raise ConfigError(f"scenario={scenario!r} must be a soaring_env.scenario.Scenario")
     if isinstance(beam_width, bool) or not isinstance(beam_width, int) or beam_width < 1:
         raise ConfigError(f"beam_width={beam_width!r} must be an integer >= 1")
+    if env_kwargs is not None and not isinstance(env_kwargs, Mapping):
+        raise ConfigError(f"env_kwargs={env_kwargs!r} must be a mapping of gym.make keywords or None")
     kwargs = dict(env_kwargs or {})
     try:
         env = gym.make(env_id, **kwargs)
