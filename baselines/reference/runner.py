@@ -17,7 +17,7 @@ import numpy as np
 from baselines._runs import DirLock, progress_bar
 from baselines.backends import check_backend, run_jobs
 from baselines.reference.beam import ReferenceConfig
-from baselines.reference.tasks import task_reference
+from baselines.reference.tasks import env_keywords, task_reference
 from baselines.reference.yardstick import (
     ScenarioReference,
     compute_reference,
@@ -125,9 +125,7 @@ def run_references(
     if not isinstance(cfg, ReferenceConfig):
         raise ConfigError(f"config={cfg!r} must be a ReferenceConfig")
     check_backend(backend, workers, address)
-    if env_kwargs is not None and not isinstance(env_kwargs, Mapping):
-        raise ConfigError(f"env_kwargs={env_kwargs!r} must be a mapping of gym.make keywords or None")
-    kwargs = dict(env_kwargs or {})
+    kwargs = env_keywords(env_kwargs)
     if kwargs and env_id is None:
         raise ConfigError("env_kwargs need env_id (a task's own reference search)")
     if not all(isinstance(s, Scenario) for s in scenarios):

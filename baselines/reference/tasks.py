@@ -61,6 +61,14 @@ GOAL_PHYSICAL_GAMMAS_DEG = (0.0, 10.0)
 REFERENCE_VERSION = 2
 
 
+def env_keywords(env_kwargs: Mapping[str, Any] | None) -> dict[str, Any]:
+    """``env_kwargs`` (``gym.make`` keywords of a task env, or None: the id's defaults) as a dict;
+    anything but a mapping raises a :class:`ConfigError` naming it."""
+    if env_kwargs is not None and not isinstance(env_kwargs, Mapping):
+        raise ConfigError(f"env_kwargs={env_kwargs!r} must be a mapping of gym.make keywords or None")
+    return dict(env_kwargs or {})
+
+
 def goal_config(beam_width: int) -> ReferenceConfig:
     """The yardstick's search at ``beam_width``, iterative widening from the same first width (or
     from ``beam_width`` itself where that is narrower): goal reaching's demonstrations and grid."""
@@ -192,9 +200,7 @@ def task_reference(
         raise ConfigError(f"scenario={scenario!r} must be a soaring_env.scenario.Scenario")
     if isinstance(beam_width, bool) or not isinstance(beam_width, int) or beam_width < 1:
         raise ConfigError(f"beam_width={beam_width!r} must be an integer >= 1")
-    if env_kwargs is not None and not isinstance(env_kwargs, Mapping):
-        raise ConfigError(f"env_kwargs={env_kwargs!r} must be a mapping of gym.make keywords or None")
-    kwargs = dict(env_kwargs or {})
+    kwargs = env_keywords(env_kwargs)
     try:
         env = gym.make(env_id, **kwargs)
     except gym.error.Error as exc:  # not a registered id
