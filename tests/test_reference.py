@@ -477,11 +477,11 @@ def test_convergence_cli_keeps_the_other_action_set(tmp_path: Path, capsys: pyte
 
 #: A primitive plan on ``paper`` cheaper than the stored reference (README, "How good is a result?"):
 #: found by a one-off search that centres the climb on the thermal, not by the reference search.
-PAPER_PRIMITIVE_BELOW_REFERENCE = (62, 165, 166, 102, 77, 157, 2, 2, 2, 27)
+PAPER_PRIMITIVE_BELOW_REFERENCE = (62, 165, 166, 102, 71, 102, 106, 157, 2, 2, 2, 27)
 
 
 def test_paper_primitive_plan_below_the_stored_reference() -> None:
-    """The README's known limit holds: the plan replays through ``env.step`` at 1,326.8 J/kg, 39 J/kg
+    """The README's known limit holds: the plan replays through ``env.step`` at 1,312.3 J/kg, 54 J/kg
     below the stored primitive reference (1,366), and the search seeded with it keeps it."""
     import gymnasium as gym
 
@@ -492,10 +492,10 @@ def test_paper_primitive_plan_below_the_stored_reference() -> None:
     for a in PAPER_PRIMITIVE_BELOW_REFERENCE:
         _, _, term, _, info = env.step(a)
     assert term and info["is_success"]
-    assert info["energy_spent"] == pytest.approx(1326.844, abs=0.01)
+    assert info["energy_spent"] == pytest.approx(1312.302, abs=0.01)
     stored = load_reference(Path(__file__).resolve().parents[1] / "results" / "reference" / "paper.json")
     assert stored.scenario == paper_scenario()
-    assert info["energy_spent"] < stored.samplers["primitive"].best_cost - 39.0
+    assert info["energy_spent"] < stored.samplers["primitive"].best_cost - 54.0
     seed = np.array(PAPER_PRIMITIVE_BELOW_REFERENCE, dtype=np.float64)[:, None]
     m = SoaringModel(scenario=paper_scenario())
     res = search(m, "primitive", ReferenceConfig(beam_width=60, start_width=30), seed_controls=[seed])
