@@ -26,6 +26,7 @@ these files.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import time
@@ -49,6 +50,27 @@ PLANNER_SEEDS = 4
 #: Depth of the local search that ends the reference (ReferenceConfig.polish): the beam's cell
 #: merging leaves plans that are not locally optimal.
 POLISH = 2
+#: Default beam width per action set. The primitives' search ranks nodes above the goal's top with
+#: ReferenceConfig.descent_step and needs 8,000 to converge with it on ``paper`` (4,000: 1,399 J/kg,
+#: 8,000 and 16,000: 1,218; README, "Optimality yardstick").
+BEAM_WIDTHS = {"primitive": 8000, "continuous": ReferenceConfig.beam_width}
+
+
+def sampler_settings(
+    beam_width: int | None, planner_iterations: int, planner_seeds: int, polish: int
+) -> dict[str, ReferenceConfig]:
+    """The yardstick's settings per action set: ``beam_width`` for both (None: :data:`BEAM_WIDTHS`);
+    the primitives rank with ``descent_step`` (their shallowest descent loses 78 m in one edge)."""
+    return {
+        s: ReferenceConfig(
+            beam_width=beam_width or BEAM_WIDTHS[s],
+            planner_iterations=planner_iterations,
+            planner_seeds=planner_seeds,
+            polish=polish,
+            descent_step=s == "primitive",
+        )
+        for s in SAMPLERS
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -57,7 +79,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--scenarios", nargs="+", default=None, help="scenario names (default: paper + --heldout)")
     p.add_argument("--heldout", type=int, default=20, help="held-out scenarios random-10000 ... (default 20)")
     p.add_argument("--samplers", nargs="+", choices=SAMPLERS, default=list(SAMPLERS), help="action sets")
-    p.add_argument("--beam-width", type=int, default=ReferenceConfig.beam_width, help="the accuracy knob")
+    p.add_argument(
+        "--beam-width",
+        type=int,
+        default=None,
+        help="the accuracy knob, for both action sets (default: "
+        + ", ".join(f"{w:,} ({s})" for s, w in BEAM_WIDTHS.items())
+        + ")",
+    )
     p.add_argument(
         "--planner-iterations",
         type=int,
@@ -89,12 +118,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.planner_iterations < 0:
         p.error(f"--planner-iterations={args.planner_iterations} must be >= 0")
     try:
-        cfg = ReferenceConfig(
-            beam_width=args.beam_width,
-            planner_iterations=args.planner_iterations,
-            planner_seeds=args.planner_seeds,
-            polish=args.polish,
-        )
+        cfg = sampler_settings(args.beam_width, args.planner_iterations, args.planner_seeds, args.polish)
         if args.convergence:
             return _convergence(cfg, args.samplers, args.out)
         names = args.scenarios if args.scenarios is not None else ["paper", *heldout_names(args.heldout)]
@@ -103,7 +127,8 @@ def main(argv: list[str] | None = None) -> int:
         workers = cli_workers(args, os.cpu_count() or 1)
         print(
             f"reference search: {len(scenarios)} scenarios x {', '.join(args.samplers)}, beam width "
-            f"{cfg.beam_width}, {'all the cluster' if workers is None else workers} workers ({args.backend}) "
+            f"{', '.join(f'{cfg[s].beam_width} ({s})' for s in args.samplers)}, "
+            f"{'all the cluster' if workers is None else workers} workers ({args.backend}) "
             f"-> {args.out}",
             flush=True,
         )
@@ -132,7 +157,7 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _convergence(cfg: ReferenceConfig, samplers: list[str], out: Path) -> int:
+def _convergence(cfg: dict[str, ReferenceConfig], samplers: list[str], out: Path) -> int:
     """The paper scenario at beam widths W/2, W, 2W: best cost, its change as a share of
     (direct - lower bound), and the time (one process, one core). The rows of action sets not run
     are kept from an existing ``convergence.json`` (each row records its planner settings)."""
@@ -144,22 +169,23 @@ def _convergence(cfg: ReferenceConfig, samplers: list[str], out: Path) -> int:
         raise ConfigError(f"{str(path)!r} cannot be read ({exc!r}); move it away to start afresh") from None
     rows: list[dict[str, Any]] = []
     for k in (0.5, 1, 2):
-        c = ReferenceConfig(**{**cfg.to_dict(), "beam_width": max(1, int(cfg.beam_width * k))})
-        print(f"beam width {c.beam_width} ...", flush=True)
+        c = {s: dataclasses.replace(v, beam_width=max(1, int(v.beam_width * k))) for s, v in cfg.items()}
+        print(f"beam width x {k} ...", flush=True)
         ref = compute_reference(sc, samplers, c)
         for s in samplers:
             sr = ref.samplers[s]
             rows.append(
                 {
                     "sampler": s,
-                    "beam_width": c.beam_width,
+                    "beam_width": c[s].beam_width,
                     "best_cost": sr.best_cost,
                     "direct_cost": sr.direct_cost,
                     "lower_bound": ref.lower_bound,
                     "seconds": sr.seconds,
                     "rollouts": sr.rollouts,
-                    "planner_iterations": c.planner_iterations,
-                    "planner_seeds": c.planner_seeds,
+                    "planner_iterations": c[s].planner_iterations,
+                    "planner_seeds": c[s].planner_seeds,
+                    "descent_step": c[s].descent_step,
                     "polish": sr.settings.get("polish", 0),
                 }
             )
@@ -177,6 +203,8 @@ def _convergence(cfg: ReferenceConfig, samplers: list[str], out: Path) -> int:
             plan = f"{int(r.get('planner_seeds', 1))} x {n_it:,} it." if n_it else "none"
             if r.get("polish", 0):
                 plan += f", polish {r['polish']}"
+            if r.get("descent_step"):
+                plan += ", descent step"
             span = r["direct_cost"] - r["lower_bound"]
             ch = "—" if prev is None else f"{100 * (r['best_cost'] - prev) / span:+.1f}"
             lines.append(

@@ -37,6 +37,11 @@ primitives, whose fixed glides are steep); or through a thermal j, ``eps (d_j + 
 what climbing there to the goal top is worth (``value_j`` per metre, measured with the action set
 at the thermal's centre); and never less than ``g (h - h_goal_top)``, the height that must be given
 up to get in. It is a heuristic, not a bound, which is why it only orders the beam and never prunes.
+With ``descent_step``, a node above the goal's top is ranked by at least ``g max(h - h_top, D) +
+eps d``, D being the least height one descending edge of the control set loses
+(:func:`smallest_descent`): the goal is a sphere, narrow at its top, and a control set whose
+descents come in steps (the primitives: 78 m per edge) cannot shed a few metres, so without it the
+beam prefers climbs that overshoot the top over those that stop just below it.
 
 Selection. A beam ordered by one heuristic crowds into one corridor, so the selection interleaves
 two orders -- by ``J + H`` and by J alone (the nodes that have gained the most energy, wherever
@@ -73,10 +78,10 @@ from typing import Any
 import numpy as np
 
 from baselines.reference.bounds import height_cap, without_thermals
-from baselines.sst.core import EDGE_GOAL, EDGE_INVALID, EDGE_VALID, SSTResult, SSTStats
+from baselines.sst.core import EDGE_GOAL, EDGE_INVALID, EDGE_VALID, Edges, SSTResult, SSTStats
 from baselines.sst.plan import Plan, plan_from_result
 from baselines.sst.soaring import S_CHI, S_E, S_H, S_N, S_V, SAMPLERS, SST_CONFIGS, SoaringProblem
-from soaring_env._validation import ConfigError, check_choice, check_int, check_positive, check_range
+from soaring_env._validation import ConfigError, check_bool, check_choice, check_int, check_positive, check_range
 from soaring_env.model import SoaringModel
 from soaring_env.physics.atmosphere import G
 from soaring_env.primitives import COL_AIRSPEED, COL_CHI_DOT_1, COL_CHI_DOT_2
@@ -151,6 +156,10 @@ class ReferenceConfig:
         one move replaces or inserts, 0 ... ``MAX_POLISH_DEPTH`` (0: none). The beam's cell merging
         leaves plans that are not locally optimal (on ``random-10005``, primitive, depth 2 lowers
         789 to 482 J/kg).
+    :param descent_step: rank a node above the goal's top as one that must still fly at least one
+        whole descending edge of the control set (:func:`smallest_descent`) besides the distance to
+        the goal (module docstring, "Ranking"). Ranking only, never pruning. False (default): the
+        goal-reaching references as first published and the planners' beams.
     """
 
     beam_width: int = 2000
@@ -172,8 +181,10 @@ class ReferenceConfig:
     time_weight: float = 0.0
     min_height: float = 0.0
     polish: int = 0
+    descent_step: bool = False
 
     def __post_init__(self) -> None:
+        check_bool("descent_step", self.descent_step)
         object.__setattr__(self, "progress_weight", check_range("progress_weight", self.progress_weight, 0.0, 100.0))
         object.__setattr__(self, "time_weight", check_range("time_weight", self.time_weight, 0.0, 1000.0))
         object.__setattr__(self, "min_height", check_range("min_height", self.min_height, 0.0, 5000.0))
@@ -289,18 +300,24 @@ def _action_at_most(model: SoaringModel, v: float, chi_dot: float, gamma: float)
     return a.astype(np.float64)
 
 
-def still_air_cost_per_metre(model: SoaringModel, controls: np.ndarray) -> float:
-    """The cheapest cost per metre of straight flight [J/(kg m)] with ``controls`` in still air
-    without thermals, from the scenario's start height: g / (L/D) of the best zero-thrust glide in
-    the continuous set, the cheapest of level powered flight and the fixed glides for the primitives.
-    """
+def _still_air_edges(model: SoaringModel, controls: np.ndarray) -> tuple[np.ndarray, Edges]:
+    """Every control flown once from the scenario's start in still air without thermals: the start
+    rows (M, 6) and the edges (:meth:`~baselines.sst.soaring.SoaringProblem.propagate`)."""
     calm = without_thermals(model)
     sc = calm.scenario
     still_field = dataclasses.replace(sc.field, wind_north=0.0, wind_east=0.0)
     still = dataclasses.replace(calm, scenario=sc.replace(field=still_field))
     problem = SoaringProblem(still, "primitive" if controls.shape[1] == 1 else "continuous")
     x = np.repeat(problem.root_state()[None, :], len(controls), axis=0)
-    e = problem.propagate(x, controls)
+    return x, problem.propagate(x, controls)
+
+
+def still_air_cost_per_metre(model: SoaringModel, controls: np.ndarray) -> float:
+    """The cheapest cost per metre of straight flight [J/(kg m)] with ``controls`` in still air
+    without thermals, from the scenario's start height: g / (L/D) of the best zero-thrust glide in
+    the continuous set, the cheapest of level powered flight and the fixed glides for the primitives.
+    """
+    x, e = _still_air_edges(model, controls)
     dist = np.hypot(e.states[:, S_N] - x[:, S_N], e.states[:, S_E] - x[:, S_E])
     if controls.shape[1] == 1:
         rows = model.library.table[controls[:, 0].astype(np.int64)]
@@ -310,6 +327,17 @@ def still_air_cost_per_metre(model: SoaringModel, controls: np.ndarray) -> float
     straight = (e.outcome != EDGE_INVALID) & (turn == 0.0)
     ratio = np.where(straight & (e.cost > 0.0), e.cost / np.maximum(dist, 1e-9), np.inf)
     return float(ratio.min()) if np.isfinite(ratio.min()) else 0.0
+
+
+def smallest_descent(model: SoaringModel, controls: np.ndarray) -> float:
+    """The least height [m] that one descending edge of ``controls`` loses in still air without
+    thermals, from the scenario's start (0 if none descends): what a node above the goal's top
+    must give up at least once (``ReferenceConfig.descent_step``). The primitives' shallowest
+    descent is the -15 degree path at 10 m/s, 78 m per 30 s edge."""
+    x, e = _still_air_edges(model, controls)
+    drop = x[:, S_H] - e.states[:, S_H]
+    drop = drop[(e.outcome != EDGE_INVALID) & (drop > 1e-6)]
+    return float(drop.min()) if len(drop) else 0.0
 
 
 def widening(start: int, widest: int) -> list[int]:
@@ -505,6 +533,7 @@ class _Context:
     g_top: float
     h_cap: float
     per_metre: float
+    descent: float  # [m]: 0 unless cfg.descent_step
     lift: np.ndarray
     speed_keys: np.ndarray
     battery: float
@@ -535,6 +564,7 @@ class _Context:
             g_top=g.height + g.radius,
             h_cap=height_cap(model),
             per_metre=still_air_cost_per_metre(model, ctrls),
+            descent=smallest_descent(model, ctrls) if cfg.descent_step else 0.0,
             lift=thermal_values(model, ctrls),
             speed_keys=speed_keys,
             battery=battery,
@@ -624,7 +654,7 @@ def _beam(
         ce = end[keep]
         jk = j[keep]
         d_goal = np.maximum(np.hypot(ce[:, S_N] - gn, ce[:, S_E] - ge) - gr, 0.0)
-        rank = jk + _cost_to_go_estimate(ce, d_goal, per_metre, g_top, lift, (gn, ge))
+        rank = jk + _cost_to_go_estimate(ce, d_goal, per_metre, g_top, lift, (gn, ge), ctx.descent)
         if cfg.progress_weight:
             rank = rank + cfg.progress_weight * per_metre * d_goal
         key = _cell_keys(ce, cfg, ctx)
@@ -713,16 +743,19 @@ def thermal_values(model: SoaringModel, controls: np.ndarray) -> np.ndarray:
     return np.array(rows, dtype=np.float64).reshape(-1, 3)
 
 
-def _cost_to_go_estimate(s, d_goal, per_metre, g_top, lift, goal_ne) -> np.ndarray:
+def _cost_to_go_estimate(s, d_goal, per_metre, g_top, lift, goal_ne, descent=0.0) -> np.ndarray:
     """The ranking heuristic of the module docstring, per state row of ``s``: the cheaper of flying
     straight in (``eps d``) and of a detour through a thermal j that climbs to the goal top there
-    (``eps (d_j + d_j,goal) - value_j max(0, h_top - h)``), but at least ``g (h - h_top)``."""
+    (``eps (d_j + d_j,goal) - value_j max(0, h_top - h)``), but at least ``g (h - h_top)``; with a
+    ``descent`` step D [m] > 0, a node above the top at least ``g max(h - h_top, D) + eps d``."""
     h = s[:, S_H]
     est = per_metre * d_goal
     for tn, te, val in lift:
         d_j = np.hypot(s[:, S_N] - tn, s[:, S_E] - te)
         d_jg = math.hypot(goal_ne[0] - tn, goal_ne[1] - te)
         est = np.minimum(est, per_metre * (d_j + d_jg) - val * np.maximum(0.0, g_top - h))
+    if descent > 0.0:  # above the top: a whole descending edge, then still the distance to go
+        est = np.where(h > g_top, np.maximum(est, G * np.maximum(h - g_top, descent) + per_metre * d_goal), est)
     return np.maximum(est, G * (h - g_top))  # height above the goal top must be given up either way
 
 
@@ -781,4 +814,12 @@ def _cell_keys(s: np.ndarray, cfg: ReferenceConfig, ctx: _Context) -> np.ndarray
     return (((ni * (1 << 16) + ei) * (1 << 13) + hi) * nc + ci) * nv + vi
 
 
-__all__ = ["ReferenceConfig", "SearchResult", "control_set", "glide_angle", "search", "still_air_cost_per_metre"]
+__all__ = [
+    "ReferenceConfig",
+    "SearchResult",
+    "control_set",
+    "glide_angle",
+    "search",
+    "smallest_descent",
+    "still_air_cost_per_metre",
+]

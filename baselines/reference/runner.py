@@ -20,6 +20,7 @@ from baselines.reference.beam import ReferenceConfig
 from baselines.reference.tasks import env_keywords, task_reference
 from baselines.reference.yardstick import (
     ScenarioReference,
+    Settings,
     compute_reference,
     load_reference,
     polish_reference,
@@ -38,18 +39,18 @@ def _job(
         dict[str, Any], tuple[str, ...], dict[str, Any], str | None, list[Any], dict[str, Any] | None, dict[str, Any]
     ],
 ) -> ScenarioReference:
-    sc_dict, samplers, cfg_dict, env_id, prefix, stored, env_kwargs = args
+    sc_dict, samplers, cfg_dicts, env_id, prefix, stored, env_kwargs = args
+    cfg = {s: ReferenceConfig(**d) for s, d in cfg_dicts.items()}  # the settings per action set
     if stored is not None:  # a finished reference that only lacks the polish
         old = ScenarioReference.from_dict(stored)
         model = SoaringModel(scenario=old.scenario)
-        cfg = ReferenceConfig(**cfg_dict)
-        pol = {s: polish_reference(model, s, old.samplers[s], sampler_config(cfg, s).polish) for s in samplers}
+        pol = {s: polish_reference(model, s, old.samplers[s], cfg[s].polish) for s in samplers}
         return dataclasses.replace(old, samplers={**old.samplers, **pol})
     if env_id is not None:  # a task's own search (its control set, battery and time limit)
         sc = Scenario.from_dict(sc_dict)
-        width, tw, floor = int(cfg_dict["beam_width"]), float(cfg_dict["time_weight"]), float(cfg_dict["min_height"])
-        return task_reference(env_id, sc, width, prefix, tw, floor, env_kwargs)
-    return compute_reference(Scenario.from_dict(sc_dict), samplers, ReferenceConfig(**cfg_dict))
+        c = cfg[samplers[0]]
+        return task_reference(env_id, sc, c.beam_width, prefix, c.time_weight, c.min_height, env_kwargs)
+    return compute_reference(Scenario.from_dict(sc_dict), samplers, cfg)
 
 
 def _save(ref: ScenarioReference, path: Path) -> None:
@@ -62,7 +63,7 @@ def _save(ref: ScenarioReference, path: Path) -> None:
 
 
 def _status(
-    path: Path, scenario: Scenario, samplers: Sequence[str], cfg: ReferenceConfig, env_kwargs: Mapping[str, Any]
+    path: Path, scenario: Scenario, samplers: Sequence[str], cfg: Settings, env_kwargs: Mapping[str, Any]
 ) -> str:
     """``"done"``: a finished file for the same scenario, samplers, settings and env keywords; ``"polish"``: one
     that differs from them only in being polished less deep (it is polished, not recomputed: the
@@ -91,7 +92,7 @@ def run_references(
     out_dir: str | Path,
     *,
     samplers: Sequence[str] = SAMPLERS,
-    config: ReferenceConfig | None = None,
+    config: Settings | None = None,
     workers: int | None = 1,
     fresh: bool = False,
     progress: bool = True,
@@ -106,7 +107,7 @@ def run_references(
     :param scenarios: scenarios with distinct names (the file names).
     :param out_dir: folder of the ``<name>.json`` files (one writer at a time: a lock file).
     :param samplers: action sets.
-    :param config: search settings.
+    :param config: search settings: one for every action set, or one per action set.
     :param workers: scenarios at a time, each single-threaded (None: every CPU of the backend).
     :param fresh: recompute even finished files.
     :param progress: show a progress bar (tqdm, if installed).
@@ -122,8 +123,9 @@ def run_references(
     :returns: the references by scenario name, in the order given.
     """
     cfg = config if config is not None else ReferenceConfig()
-    if not isinstance(cfg, ReferenceConfig):
-        raise ConfigError(f"config={cfg!r} must be a ReferenceConfig")
+    if isinstance(samplers, str) or len(samplers) == 0:
+        raise ConfigError(f"samplers={samplers!r} must be a non-empty sequence of {', '.join(map(repr, SAMPLERS))}")
+    cfg_dicts = {s: sampler_config(cfg, s).to_dict() for s in samplers}  # checks the settings
     check_backend(backend, workers, address)
     kwargs = env_keywords(env_kwargs)
     if kwargs and env_id is None:
@@ -154,7 +156,7 @@ def run_references(
                 (
                     s.to_dict(),
                     tuple(samplers),
-                    cfg.to_dict(),
+                    cfg_dicts,
                     env_id,
                     [np.asarray(a).tolist() for a in pre.get(s.name, ())],
                     load_reference(reference_path(out, s.name)).to_dict() if status[s.name] == "polish" else None,

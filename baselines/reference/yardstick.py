@@ -137,10 +137,14 @@ def load_references(out_dir: str | Path) -> dict[str, ScenarioReference]:
     return refs
 
 
+#: Search settings: one :class:`ReferenceConfig` for every action set, or one per action set.
+Settings = ReferenceConfig | Mapping[str, ReferenceConfig]
+
+
 def compute_reference(
     scenario: Scenario,
     samplers: Sequence[str] = SAMPLERS,
-    config: ReferenceConfig | None = None,
+    config: Settings | None = None,
     *,
     model_kwargs: Mapping[str, Any] | None = None,
     progress: Callable[[str, int, int], None] | None = None,
@@ -149,7 +153,8 @@ def compute_reference(
 
     :param scenario: the scenario (its ``name`` is the file name under ``results/reference/``).
     :param samplers: action sets, ``"primitive"`` and/or ``"continuous"``.
-    :param config: search settings (the same for the direct and the real field).
+    :param config: search settings (the same for the direct and the real field): one for both
+        action sets or one per action set (:func:`sampler_config`).
     :param model_kwargs: further :class:`SoaringModel` arguments (aircraft, library, ...).
     :param progress: called as ``progress(stage, depth, max_edges)`` (stage e.g. ``"primitive/direct"``).
     """
@@ -158,8 +163,8 @@ def compute_reference(
     if isinstance(samplers, str) or not all(isinstance(s, str) for s in samplers) or len(samplers) == 0:
         raise ConfigError(f"samplers={samplers!r} must be a non-empty sequence of {', '.join(map(repr, SAMPLERS))}")
     cfg = config if config is not None else ReferenceConfig()
-    if not isinstance(cfg, ReferenceConfig):
-        raise ConfigError(f"config={cfg!r} must be a ReferenceConfig")
+    for s in samplers:
+        sampler_config(cfg, s)  # checks the settings before any search
     model = SoaringModel(scenario=scenario, **dict(model_kwargs or {}))
     direct_model = without_thermals(model)
     out: dict[str, SamplerReference] = {}
@@ -232,13 +237,21 @@ def polish_reference(model: SoaringModel, sampler: str, ref: SamplerReference, d
     )
 
 
-def sampler_config(cfg: ReferenceConfig, sampler: str) -> ReferenceConfig:
-    """The settings the search of one action set runs with (and its file records): the same for
-    both action sets (a continuous planner plan's controls join the beam's control set for that
-    search, see :func:`~baselines.reference.beam.search`), except that the continuous plans are
-    polished to depth 1 at most: a depth-2 move there tries every pair of the ~400 controls at
-    every position (~160,000 edited plans each, ~25x the primitives')."""
+def sampler_config(config: Settings, sampler: str) -> ReferenceConfig:
+    """The settings the search of one action set runs with (and its file records): ``config``
+    itself, or its entry for ``sampler`` if it maps action sets to settings (a continuous planner
+    plan's controls join the beam's control set for that search, see
+    :func:`~baselines.reference.beam.search`), except that the continuous plans are polished to
+    depth 1 at most: a depth-2 move there tries every pair of the ~400 controls at every position
+    (~160,000 edited plans each, ~25x the primitives')."""
     check_choice("sampler", sampler, SAMPLERS)
+    if isinstance(config, Mapping):
+        if sampler not in config:
+            raise ConfigError(f"config has no settings for the action set {sampler!r}; it has {sorted(config)!r}")
+        config = config[sampler]
+    if not isinstance(config, ReferenceConfig):
+        raise ConfigError(f"config={config!r} must be a ReferenceConfig (or a mapping of action sets to them)")
+    cfg = config
     if sampler == "continuous" and cfg.polish > 1:
         return dataclasses.replace(cfg, polish=1)
     return cfg
@@ -253,6 +266,7 @@ __all__ = [
     "MIN_GAP",
     "SamplerReference",
     "ScenarioReference",
+    "Settings",
     "compute_reference",
     "load_reference",
     "load_references",
