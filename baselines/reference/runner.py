@@ -27,6 +27,7 @@ from baselines.reference.yardstick import (
     reference_path,
     sampler_config,
     save_reference,
+    settings_by_sampler,
 )
 from baselines.sst.soaring import SAMPLERS
 from soaring_env._validation import ConfigError
@@ -123,9 +124,7 @@ def run_references(
     :returns: the references by scenario name, in the order given.
     """
     cfg = config if config is not None else ReferenceConfig()
-    if isinstance(samplers, str) or len(samplers) == 0:
-        raise ConfigError(f"samplers={samplers!r} must be a non-empty sequence of {', '.join(map(repr, SAMPLERS))}")
-    cfg_dicts = {s: sampler_config(cfg, s).to_dict() for s in samplers}  # checks the settings
+    cfg_dicts = {s: c.to_dict() for s, c in settings_by_sampler(cfg, samplers).items()}  # checks them
     check_backend(backend, workers, address)
     kwargs = env_keywords(env_kwargs)
     if kwargs and env_id is None:

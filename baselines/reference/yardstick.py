@@ -160,11 +160,8 @@ def compute_reference(
     """
     if not isinstance(scenario, Scenario):
         raise ConfigError(f"scenario={scenario!r} must be a soaring_env.scenario.Scenario")
-    if isinstance(samplers, str) or not all(isinstance(s, str) for s in samplers) or len(samplers) == 0:
-        raise ConfigError(f"samplers={samplers!r} must be a non-empty sequence of {', '.join(map(repr, SAMPLERS))}")
     cfg = config if config is not None else ReferenceConfig()
-    for s in samplers:
-        sampler_config(cfg, s)  # checks the settings before any search
+    settings_by_sampler(cfg, samplers)  # checks the action sets and settings before any search
     model = SoaringModel(scenario=scenario, **dict(model_kwargs or {}))
     direct_model = without_thermals(model)
     out: dict[str, SamplerReference] = {}
@@ -237,6 +234,13 @@ def polish_reference(model: SoaringModel, sampler: str, ref: SamplerReference, d
     )
 
 
+def settings_by_sampler(config: Settings, samplers: Sequence[str]) -> dict[str, ReferenceConfig]:
+    """:func:`sampler_config` of each action set in ``samplers`` (a non-empty sequence of names)."""
+    if isinstance(samplers, str) or not all(isinstance(s, str) for s in samplers) or len(samplers) == 0:
+        raise ConfigError(f"samplers={samplers!r} must be a non-empty sequence of {', '.join(map(repr, SAMPLERS))}")
+    return {s: sampler_config(config, s) for s in samplers}
+
+
 def sampler_config(config: Settings, sampler: str) -> ReferenceConfig:
     """The settings the search of one action set runs with (and its file records): ``config``
     itself, or its entry for ``sampler`` if it maps action sets to settings (a continuous planner
@@ -273,4 +277,5 @@ __all__ = [
     "polish_reference",
     "reference_path",
     "save_reference",
+    "settings_by_sampler",
 ]
