@@ -68,6 +68,8 @@ ALGOS: dict[str, str] = {
     "continuous": CONTINUOUS_ID,
     "grid": CONTINUOUS_ID,
 }
+#: Policy parametrisations (``TrainConfig.policy``).
+POLICIES = ("mlp", "scoring")
 #: The algorithms that fly the continuous env ids.
 CONTINUOUS_ALGOS = ("continuous", "grid")
 #: Task -> (env id of the primitive algorithms, env id of ``continuous``, scenario family).
@@ -114,7 +116,13 @@ class TrainConfig:
         the Gaussian and the grid policies.
     :param vf_coef: value-loss weight.
     :param max_grad_norm: gradient clipping.
-    :param net_arch: hidden layers of the separate policy and value MLPs.
+    :param net_arch: hidden layers of the separate policy and value MLPs (with ``policy="scoring"``:
+        the value MLP's; the scorer's own are ``scorer_hidden``).
+    :param policy: ``"mlp"`` (default: SB3's MLP policy) or ``"scoring"`` (``algo="discrete"`` only:
+        :class:`baselines.scoring.PrimitiveScoringPolicy`, each primitive's logit computed by one
+        MLP shared by all primitives from the observation and where that primitive would take the
+        aircraft -- its path in the observed wind, relative to the goal and the observed thermals).
+    :param scorer_hidden: with ``policy="scoring"``: the widths of the shared scoring MLP.
     :param log_std_init: initial log standard deviation of the continuous policy.
     :param shaping: weight of this module's extra potential-based shaping (Ng et al. 1999),
         ``shaping * (gamma * phi(s') - phi(s))`` with ``phi = -d_goal / 1 km``; 0 (default) leaves
@@ -190,6 +198,8 @@ class TrainConfig:
     vf_coef: float = 0.5
     max_grad_norm: float = 0.5
     net_arch: tuple[int, ...] = (128, 128)
+    policy: str = "mlp"
+    scorer_hidden: tuple[int, ...] = (64, 64)
     log_std_init: float = -0.5
     shaping: float = 0.0
     body_frame: bool | None = None
@@ -239,6 +249,19 @@ class TrainConfig:
         if not 0.0 < self.gamma <= 1.0:
             raise ValueError(f"gamma={self.gamma!r} must lie in (0, 1]")
         object.__setattr__(self, "net_arch", tuple(int(n) for n in self.net_arch))
+        if self.policy not in POLICIES:
+            raise ValueError(f"policy={self.policy!r} is unknown; known: {', '.join(POLICIES)}")
+        if self.policy == "scoring" and (self.algo != "discrete" or not self.body_frame or self.task != "goal"):
+            raise ValueError(
+                f"policy='scoring' needs algo='discrete' on the goal task with body_frame=True "
+                f"(got algo={self.algo!r}, task={self.task!r}, body_frame={self.body_frame!r})"
+            )
+        hidden = self.scorer_hidden
+        if isinstance(hidden, (str, bytes)) or not hasattr(hidden, "__iter__") or not hidden:
+            raise ValueError(f"scorer_hidden={hidden!r} must be a non-empty list of layer widths")
+        if any(isinstance(n, bool) or not isinstance(n, int) or n < 1 for n in hidden):
+            raise ValueError(f"scorer_hidden={hidden!r} must hold integers >= 1")
+        object.__setattr__(self, "scorer_hidden", tuple(int(n) for n in hidden))
         if self.ent_coef is None:
             object.__setattr__(self, "ent_coef", 0.01 if self.algo in CONTINUOUS_ALGOS else 0.03)
         object.__setattr__(self, "env_kwargs", dict(self.env_kwargs))
@@ -296,6 +319,7 @@ class TrainConfig:
     def to_dict(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)
         d["net_arch"] = list(self.net_arch)
+        d["scorer_hidden"] = list(self.scorer_hidden)
         d["env_kwargs"] = dict(self.env_kwargs)
         d["env_id"] = self.env_id
         return d
@@ -1269,10 +1293,19 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
 
         algo_cls = _algo_class(config.algo)
         policy_kwargs: dict[str, Any] = {"net_arch": {"pi": list(config.net_arch), "vf": list(config.net_arch)}}
+        policy_cls: Any = "MlpPolicy"
         if config.algo == "continuous":
             policy_kwargs["log_std_init"] = config.log_std_init
+        if config.policy == "scoring":
+            from baselines.scoring import PrimitiveScoringPolicy, scorer_kwargs
+
+            policy_cls = PrimitiveScoringPolicy
+            policy_kwargs = {
+                "net_arch": {"pi": [], "vf": list(config.net_arch)},
+                "scorer": {**scorer_kwargs(_probe(config)), "hidden": list(config.scorer_hidden)},
+            }
         model = algo_cls(
-            "MlpPolicy",
+            policy_cls,
             train_env,
             learning_rate=_linear_schedule(config.learning_rate, config.lr_final_fraction),
             n_steps=config.n_steps,

@@ -221,7 +221,15 @@ def _tiny_run(algo: str, ref_dir: Path, **kwargs: object) -> TrainConfig:
     )
 
 
-@pytest.mark.parametrize(("algo", "kwargs"), [("discrete", {}), ("masked", {}), ("grid", {"final_glide": True})])
+@pytest.mark.parametrize(
+    ("algo", "kwargs"),
+    [
+        ("discrete", {}),
+        ("discrete", {"policy": "scoring", "scorer_hidden": (8,)}),
+        ("masked", {}),
+        ("grid", {"final_glide": True}),
+    ],
+)
 def test_train_with_demos_primitives_and_final_glide(
     ref_dir: Path, tmp_path: Path, algo: str, kwargs: dict[str, object]
 ) -> None:

@@ -1,0 +1,283 @@
+"""A policy that scores each motion primitive by where it would take the aircraft.
+
+A plain MLP over the 174 primitives must learn, from the observation alone, which of 174 fixed
+30 s manoeuvres ends in a thermal's core, passes the goal or spirals in lift: a product of the
+thermal offsets, the wind and each primitive's geometry, learnt anew for every output. Cloned from
+the reference plans such policies fly safely but straight (README, rounds four and five: held-out
+median regret 1.00-1.06). :class:`PrimitiveScoringPolicy` gives PPO that geometry as an inductive
+bias instead: the logit of primitive ``a`` is one small MLP shared by all primitives,
+
+    logit_a = f_theta(obs, phi(obs, a)),
+
+where ``phi`` holds what the primitive does from the observed state: its still-air path (flown once
+through the model's own rollout, :func:`primitive_paths`) shifted by the observed wind, the goal
+offset it would leave, its offset to each observed thermal and a crude lift estimate along it (a
+Gaussian bell of the observed peak and radius; the network learns how far to trust it). ``phi`` is a
+fixed function of the observation, so this is an ordinary stochastic policy over ``Discrete(174)``
+trained by ordinary PPO; only its parametrisation differs (action features shared across actions,
+as in Q-networks over action embeddings). The critic is the usual MLP.
+
+It reads the body-frame observation (:class:`baselines.ppo.BodyFrame`, the thermal slots of the
+privileged tier); its layout is resolved by name when the policy is built.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import torch
+from stable_baselines3.common.policies import ActorCriticPolicy
+from stable_baselines3.common.torch_layers import MlpExtractor
+from torch import nn
+
+from soaring_env._validation import ConfigError
+from soaring_env.physics.thermals import WindField
+from soaring_env.primitives import COL_AIRSPEED, COL_CHI_DOT_1, COL_CHI_DOT_2, COL_FAMILY, COL_GAMMA, rollout
+
+#: Samples of each primitive's path the lift estimate is averaged over (every 3 s of a 30 s edge).
+N_PATH_SAMPLES = 10
+
+
+def primitive_paths(model: Any, n_samples: int = N_PATH_SAMPLES) -> dict[str, list[Any]]:
+    """Each primitive of ``model.library`` flown once in still air without thermals, from the
+    origin heading north at the scenario's start height, through the model's rollout.
+
+    :returns: ``paths`` (174, n_samples, 3): (ahead, right, up) offsets [m] at ``times`` [s]
+        (n_samples evenly spaced output points, the last the edge's end); ``static`` (174, 8):
+        airspeed / 20 m/s, path angle [rad], the two halves' turns / 1080 deg, the four family
+        flags; ``cost`` (174,): the still-air specific energy spent [kJ/kg] (fuel + potential).
+        Plain lists, so that a saved model's constructor arguments stay JSON-friendly.
+    """
+    lib = model.library
+    sc = model.scenario
+    still = WindField(thermals=(), model=sc.field.model, zi=sc.field.zi)
+    n = len(lib)
+    h0 = float(sc.start[3])
+    x0 = np.tile(np.array([0.0, 0.0, 0.0, h0]), (n, 1))
+    r = rollout(x0, still, model.aircraft, primitive=np.arange(n), library=lib, airspeed_prev=None)
+    pts = r.states.shape[1]
+    pick = np.linspace(pts / n_samples - 1, pts - 1, n_samples).round().astype(np.int64)
+    st = r.states[:, pick, :]
+    paths = np.stack([st[..., 0], st[..., 1], st[..., 3] - h0], axis=-1)
+    tab = lib.table
+    full = math.radians(1080.0) / lib.duration
+    fam = np.eye(4)[tab[:, COL_FAMILY].astype(np.int64)]
+    static = np.column_stack(
+        [
+            tab[:, COL_AIRSPEED] / 20.0,
+            tab[:, COL_GAMMA],
+            tab[:, COL_CHI_DOT_1] / full,
+            tab[:, COL_CHI_DOT_2] / full,
+            fam,
+        ]
+    )
+    cost = (r.fuel + r.potential) / 1000.0
+    return {
+        "paths": paths.tolist(),
+        "times": r.times[pick].tolist(),
+        "static": static.tolist(),
+        "cost": cost.tolist(),
+    }
+
+
+@dataclasses.dataclass(frozen=True)
+class ObservationLayout:
+    """Where :class:`PrimitiveScorer` finds its inputs in the body-frame observation, and the env's
+    scales (observation = SI value / scale)."""
+
+    goal: tuple[int, int, int]  # ahead, right, up
+    wind: tuple[int, int]  # ahead, right
+    thermals: tuple[tuple[int, int, int, int, int], ...]  # present, ahead, right, peak, radius
+    position_scale: float
+    height_scale: float
+    updraft_scale: float
+    wind_scale: float
+
+    @classmethod
+    def of(cls, names: Sequence[str], config: Any) -> ObservationLayout:
+        """The layout of a body-frame observation whose first entries are the env's ``names``
+        (the rotated pairs keep the names' positions: ``*_north`` holds ahead, ``*_east`` right).
+
+        :raises ConfigError: a layout without a goal or without thermal slots (the sensed tiers).
+        """
+        where = {n: i for i, n in enumerate(names)}
+        need = ("goal_north", "goal_east", "goal_up", "wind_north", "wind_east", "thermal_0_present")
+        missing = [n for n in need if n not in where]
+        if missing:
+            raise ConfigError(
+                f"policy='scoring' needs the goal and the observed thermal slots (privileged tier); "
+                f"the observation lacks {', '.join(missing)}"
+            )
+        slots = []
+        j = 0
+        while f"thermal_{j}_present" in where:
+            slots.append(tuple(where[f"thermal_{j}_{k}"] for k in ("present", "north", "east", "peak", "radius")))
+            j += 1
+        return cls(
+            goal=(where["goal_north"], where["goal_east"], where["goal_up"]),
+            wind=(where["wind_north"], where["wind_east"]),
+            thermals=tuple(slots),  # type: ignore[arg-type]
+            position_scale=float(config.position_scale),
+            height_scale=float(config.height_scale),
+            updraft_scale=float(config.updraft_scale),
+            wind_scale=float(config.wind_scale),
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(self).items()}
+
+
+def scorer_kwargs(env: Any) -> dict[str, Any]:
+    """The constructor arguments of :class:`PrimitiveScorer` for ``env`` (a raw single env of a
+    primitive task): the primitives' still-air paths and the observation layout."""
+    u = env.unwrapped if hasattr(env, "unwrapped") else env
+    return {**primitive_paths(u.model), "layout": ObservationLayout.of(u.observation_names, u.config).to_dict()}
+
+
+class PrimitiveScorer(nn.Module):
+    """Body-frame observations (B, D) -> logits (B, 174) (module docstring).
+
+    :param paths: (A, K, 3) still-air offsets [m]; :param times: (K,) their times [s];
+    :param static: (A, S) fixed features; :param cost: (A,) still-air cost [kJ/kg];
+    :param layout: :meth:`ObservationLayout.to_dict`; :param hidden: the shared MLP's widths.
+    """
+
+    paths: torch.Tensor
+    times: torch.Tensor
+    fixed: torch.Tensor
+
+    def __init__(
+        self,
+        obs_dim: int,
+        paths: Sequence[Any],
+        times: Sequence[float],
+        static: Sequence[Any],
+        cost: Sequence[float],
+        layout: dict[str, Any],
+        hidden: Sequence[int] = (64, 64),
+    ) -> None:
+        super().__init__()
+        f32 = torch.float32
+        self.register_buffer("paths", torch.tensor(np.asarray(paths), dtype=f32))
+        self.register_buffer("times", torch.tensor(np.asarray(times), dtype=f32))
+        fixed = np.column_stack([np.asarray(static), np.asarray(cost)[:, None], np.asarray(paths)[:, -1, :] / 1000.0])
+        self.register_buffer("fixed", torch.tensor(fixed, dtype=f32))
+        lay = ObservationLayout(
+            goal=tuple(layout["goal"]),  # type: ignore[arg-type]
+            wind=tuple(layout["wind"]),  # type: ignore[arg-type]
+            thermals=tuple(tuple(s) for s in layout["thermals"]),  # type: ignore[arg-type]
+            **{k: float(layout[k]) for k in ("position_scale", "height_scale", "updraft_scale", "wind_scale")},
+        )
+        self.layout = lay
+        n_dyn = 6 + 4 * len(lay.thermals)
+        self.n_features = fixed.shape[1] + n_dyn
+        sizes = [int(h) for h in hidden]
+        self.state_in = nn.Linear(obs_dim, sizes[0])
+        self.action_in = nn.Linear(self.n_features, sizes[0], bias=False)
+        # a learnt vector per primitive beside its features: what the features miss (the plain
+        # MLP's per-action output weights); without it the cloning fits far worse (README)
+        self.action_embedding = nn.Parameter(torch.zeros(len(fixed), sizes[0]))
+        layers: list[Any] = []
+        for a, b in itertools.pairwise(sizes):
+            layers += [nn.Tanh(), nn.Linear(a, b)]
+        layers += [nn.Tanh(), nn.Linear(sizes[-1], 1)]
+        self.head = nn.Sequential(*layers)
+
+    def features(self, obs: Any) -> Any:
+        """(B, A, F) per-primitive features of body-frame observations (B, D)."""
+        lay = self.layout
+        b = obs.shape[0]
+        km = 1000.0
+        wind = obs[:, list(lay.wind)] * lay.wind_scale  # (B, 2) ahead, right [m/s]
+        # ground-relative path: still-air offsets + wind drift (thermals do not drift by default)
+        xy = self.paths[None, :, :, :2] + wind[:, None, None, :] * self.times[None, None, :, None]  # (B,A,K,2)
+        end = xy[:, :, -1, :]
+        goal = obs[:, list(lay.goal[:2])] * lay.position_scale
+        to_goal = goal[:, None, :] - end  # (B, A, 2) [m]
+        d_goal = torch.linalg.vector_norm(to_goal, dim=-1)
+        up_left = obs[:, lay.goal[2]][:, None] * lay.height_scale - self.paths[None, :, -1, 2]
+        d_now = torch.linalg.vector_norm(goal, dim=-1)[:, None]
+        lift = torch.zeros(b, xy.shape[1], xy.shape[2], dtype=obs.dtype)
+        per_slot = []
+        for present, ia, ir, ipk, irad in lay.thermals:
+            c = torch.stack([obs[:, ia], obs[:, ir]], dim=-1) * lay.position_scale  # (B, 2)
+            on = obs[:, present][:, None]
+            peak = obs[:, ipk][:, None] * lay.updraft_scale
+            rad = torch.clamp(obs[:, irad] * lay.position_scale, min=10.0)[:, None]
+            d = torch.linalg.vector_norm(c[:, None, None, :] - xy, dim=-1)  # (B, A, K)
+            w = on[:, :, None] * peak[:, :, None] * torch.exp(-((d / rad[:, :, None]) ** 2))
+            lift = lift + w
+            rel = (c[:, None, :] - end) * on[:, :, None]  # empty slots: zeros
+            per_slot += [
+                on.expand(-1, xy.shape[1]),
+                rel[..., 0] / km,
+                rel[..., 1] / km,
+                on * torch.clamp(d[:, :, -1] / rad, max=10.0),
+            ]
+        dt = float(self.times[-1])
+        dyn = torch.stack(
+            [
+                to_goal[..., 0] / km,
+                to_goal[..., 1] / km,
+                (d_goal - d_now) / km,
+                up_left / km,
+                lift.mean(dim=-1) / lay.updraft_scale,
+                lift.mean(dim=-1) * dt / km,  # height the lift would give [km]
+                *per_slot,
+            ],
+            dim=-1,
+        )
+        return torch.cat([self.fixed[None].expand(b, -1, -1), dyn], dim=-1)
+
+    def forward(self, obs: Any) -> Any:
+        h = self.state_in(obs)[:, None, :] + self.action_in(self.features(obs)) + self.action_embedding[None]
+        return self.head(h).squeeze(-1)
+
+
+class ScoringExtractor(MlpExtractor):
+    """SB3's extractor with the actor replaced by :class:`PrimitiveScorer` (latent = logits)."""
+
+    def __init__(self, feature_dim: int, vf_arch: Sequence[int], scorer: dict[str, Any]) -> None:
+        super().__init__(feature_dim, net_arch={"pi": [], "vf": list(vf_arch)}, activation_fn=nn.Tanh)
+        self.policy_net = PrimitiveScorer(feature_dim, **scorer)  # type: ignore[assignment]
+        self.latent_dim_pi = len(scorer["paths"])
+
+
+class PrimitiveScoringPolicy(ActorCriticPolicy):
+    """ActorCriticPolicy over ``Discrete(174)`` whose logits come from :class:`PrimitiveScorer`.
+
+    :param scorer: :func:`scorer_kwargs` of the env (plus optionally ``hidden``).
+    """
+
+    def __init__(self, *args: Any, scorer: dict[str, Any], **kwargs: Any) -> None:
+        self.scorer = dict(scorer)
+        super().__init__(*args, **kwargs)
+
+    def _build_mlp_extractor(self) -> None:
+        arch = self.net_arch
+        vf = arch.get("vf", [64, 64]) if isinstance(arch, dict) else list(arch)
+        self.mlp_extractor = ScoringExtractor(self.features_dim, vf, self.scorer)
+
+    def _build(self, lr_schedule: Any) -> None:
+        super()._build(lr_schedule)
+        # the scorer's output already is the logits; its last layer starts small, as SB3's
+        # action_net does (a near-uniform first policy)
+        self.action_net = nn.Identity()
+        scorer = self.mlp_extractor.policy_net
+        assert isinstance(scorer, PrimitiveScorer)
+        last = scorer.head[-1]
+        assert isinstance(last, nn.Linear)
+        nn.init.orthogonal_(last.weight, gain=0.01)
+        nn.init.zeros_(last.bias)
+        optimizer_class: Any = self.optimizer_class
+        self.optimizer = optimizer_class(self.parameters(), lr=lr_schedule(1), **self.optimizer_kwargs)
+
+    def _get_constructor_parameters(self) -> dict[str, Any]:
+        data = super()._get_constructor_parameters()
+        data["scorer"] = self.scorer
+        return data

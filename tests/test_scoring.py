@@ -1,0 +1,148 @@
+"""The primitive-scoring policy: its geometry in closed form, mirror symmetry, save and load."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+
+import soaring_env  # noqa: F401  (registers the envs)
+from baselines.ppo import DISCRETE_ID, BodyFrameObservation, TrainConfig
+from soaring_env.primitives import COL_AIRSPEED, COL_CHI_DOT_1, COL_FAMILY, COL_GAMMA, SPIRAL, STRAIGHT
+
+
+@pytest.fixture(scope="module")
+def env() -> gym.Env:
+    return BodyFrameObservation(gym.make(DISCRETE_ID))
+
+
+def test_still_air_paths_in_closed_form(env: gym.Env) -> None:
+    """Straight primitives end v cos(gamma) Ts ahead and v sin(gamma) Ts up; a 1080-degree spiral
+    closes on itself (three full circles), ending where it started but v sin(gamma) Ts lower."""
+    from baselines.scoring import primitive_paths
+
+    u = env.unwrapped
+    kw = primitive_paths(u.model)
+    paths, tab, ts = np.asarray(kw["paths"]), u.library.table, u.library.duration
+    assert paths.shape == (174, 10, 3) and np.isclose(kw["times"][-1], ts)
+    v, g = tab[:, COL_AIRSPEED], tab[:, COL_GAMMA]
+    straight = tab[:, COL_FAMILY] == STRAIGHT
+    end = paths[:, -1]
+    assert np.allclose(end[straight, 0], (v * np.cos(g) * ts)[straight], atol=1e-6)
+    assert np.allclose(end[straight, 1], 0.0, atol=1e-6)
+    assert np.allclose(end[:, 2], v * np.sin(g) * ts, atol=1e-6)  # every family: gamma is constant
+    spiral = (tab[:, COL_FAMILY] == SPIRAL) & np.isclose(np.abs(tab[:, COL_CHI_DOT_1]) * ts, math.radians(1080))
+    assert spiral.sum() > 0 and np.allclose(end[spiral, :2], 0.0, atol=1e-6)
+    # still-air cost: a level straight primitive spends fuel only, a -45 degree one gains g * 212 m
+    cost = np.asarray(kw["cost"])
+    assert np.all(cost[straight & (g == 0.0)] > 0.0)
+
+
+def _features(env: gym.Env, obs: np.ndarray) -> np.ndarray:
+    import torch
+
+    from baselines.scoring import PrimitiveScorer, scorer_kwargs
+
+    sc = PrimitiveScorer(len(obs), **scorer_kwargs(env))
+    with torch.no_grad():
+        return sc.features(torch.as_tensor(obs[None], dtype=torch.float32))[0].numpy()
+
+
+def test_features_of_the_mirror_image_are_mirrored(env: gym.Env) -> None:
+    """The mirror world (east -> -east) with the mirrored primitive gives the same features up to
+    the sign of every 'right' component: the scorer sees the model's symmetry."""
+    from baselines.ppo import policy_frame
+
+    u = env.unwrapped
+    signs = policy_frame(u).mirror_signs(u.observation_names)
+    mirror = u.library.mirror_indices()
+    rng = np.random.default_rng(0)
+    for seed in range(3):
+        obs, _ = env.reset(seed=seed)
+        obs = obs + rng.normal(0, 0.05, obs.shape).astype(np.float32) * (obs != 0)
+        f, fm = _features(env, obs), _features(env, obs * signs)
+        # which feature columns flip: compare a primitive with its own mirror image
+        flip = np.where(np.isclose(f[mirror], fm, atol=1e-5), 1.0, -1.0).min(axis=0)
+        assert np.allclose(f[mirror] * flip, fm, atol=1e-5)
+        assert np.any(flip < 0)  # the right components and turn features do flip
+
+
+def test_lift_estimate_is_largest_on_the_thermal(env: gym.Env) -> None:
+    """A thermal put 300 m ahead: the 10 m/s level straight primitive, which ends on its centre,
+    has more estimated lift than any primitive that turns away from it."""
+    obs, _ = env.reset(seed=0)
+    u = env.unwrapped
+    names = u.observation_names
+    i = {n: k for k, n in enumerate(names)}
+    obs = obs.copy()
+    obs[[i["wind_north"], i["wind_east"]]] = 0.0
+    for j in range(3):
+        obs[[i[f"thermal_{j}_present"], i[f"thermal_{j}_north"], i[f"thermal_{j}_east"]]] = 0.0
+    obs[i["thermal_0_present"]], obs[i["thermal_0_north"]] = 1.0, 0.3
+    obs[i["thermal_0_peak"]], obs[i["thermal_0_radius"]] = 0.5, 0.08
+    f = _features(env, obs)
+    tab = u.library.table
+    level = (tab[:, COL_FAMILY] == STRAIGHT) & (tab[:, COL_AIRSPEED] == 10.0) & (tab[:, COL_GAMMA] == 0.0)
+    level10 = int(np.flatnonzero(level)[0])
+    from baselines.scoring import PrimitiveScorer, scorer_kwargs
+
+    n_fixed = PrimitiveScorer(len(obs), **scorer_kwargs(env)).fixed.shape[1]
+    lift = f[:, n_fixed + 4]
+    turning = tab[:, COL_FAMILY] != STRAIGHT
+    assert lift[level10] > lift[turning].max()
+    assert np.isclose(f[level10, n_fixed + 6 + 3], 0.0, atol=1e-3)  # ends on the centre: d / r = 0
+
+
+def test_scoring_policy_saves_loads_and_predicts_alike(env: gym.Env, tmp_path: Path) -> None:
+    import torch
+    from stable_baselines3 import PPO
+
+    from baselines.scoring import PrimitiveScoringPolicy, scorer_kwargs
+
+    torch.manual_seed(0)
+    model = PPO(
+        PrimitiveScoringPolicy,
+        env,
+        seed=0,
+        device="cpu",
+        policy_kwargs={"net_arch": {"pi": [], "vf": [32]}, "scorer": {**scorer_kwargs(env), "hidden": [16]}},
+    )
+    obs, _ = env.reset(seed=1)
+    with torch.no_grad():
+        probs = model.policy.get_distribution(torch.as_tensor(obs[None])).distribution.probs.numpy()[0]
+    assert probs.shape == (174,) and np.isclose(probs.sum(), 1.0, atol=1e-5)
+    assert probs.max() < 2.0 / 174  # the small last layer: a near-uniform first policy
+    model.save(tmp_path / "m.zip")
+    loaded = PPO.load(tmp_path / "m.zip", device="cpu")
+    for seed in range(3):
+        o, _ = env.reset(seed=seed)
+        assert model.predict(o, deterministic=True)[0] == loaded.predict(o, deterministic=True)[0]
+
+
+def test_bad_scoring_settings_are_refused() -> None:
+    for kwargs in (
+        {"algo": "continuous"},
+        {"algo": "masked"},
+        {"algo": "discrete", "task": "climb"},
+        {"algo": "discrete", "body_frame": False},
+    ):
+        with pytest.raises(ValueError, match="policy='scoring'"):
+            TrainConfig(policy="scoring", **kwargs)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="policy="):
+        TrainConfig(algo="discrete", policy="transformer")
+    for bad in ((), "64", (0,), (16.5,), (True,)):
+        with pytest.raises(ValueError, match="scorer_hidden"):
+            TrainConfig(algo="discrete", policy="scoring", scorer_hidden=bad)  # type: ignore[arg-type]
+
+
+def test_scoring_needs_the_observed_thermals() -> None:
+    from baselines.scoring import scorer_kwargs
+    from soaring_env._validation import ConfigError
+
+    with pytest.raises(ConfigError, match="thermal_0_present"):
+        scorer_kwargs(gym.make(DISCRETE_ID, observe_thermals=False))
