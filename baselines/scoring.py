@@ -59,7 +59,7 @@ def primitive_paths(model: Any, n_samples: int = N_PATH_SAMPLES) -> dict[str, li
     n = len(lib)
     h0 = float(sc.start[3])
     x0 = np.tile(np.array([0.0, 0.0, 0.0, h0]), (n, 1))
-    r = rollout(x0, still, model.aircraft, primitive=np.arange(n), library=lib, airspeed_prev=None)
+    r = rollout(x0, still, model.aircraft, primitive=np.arange(n), library=lib)
     pts = r.states.shape[1]
     pick = np.linspace(pts / n_samples - 1, pts - 1, n_samples).round().astype(np.int64)
     st = r.states[:, pick, :]
@@ -131,6 +131,16 @@ class ObservationLayout:
     def to_dict(self) -> dict[str, Any]:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(self).items()}
 
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> ObservationLayout:
+        """The inverse of :meth:`to_dict` (a saved model's constructor arguments)."""
+        return cls(
+            goal=tuple(d["goal"]),  # type: ignore[arg-type]
+            wind=tuple(d["wind"]),  # type: ignore[arg-type]
+            thermals=tuple(tuple(t) for t in d["thermals"]),  # type: ignore[arg-type]
+            **{k: float(d[k]) for k in ("position_scale", "height_scale", "updraft_scale", "wind_scale")},
+        )
+
 
 def scorer_kwargs(env: Any) -> dict[str, Any]:
     """The constructor arguments of :class:`PrimitiveScorer` for ``env`` (a raw single env of a
@@ -167,12 +177,7 @@ class PrimitiveScorer(nn.Module):
         self.register_buffer("times", torch.tensor(np.asarray(times), dtype=f32))
         fixed = np.column_stack([np.asarray(static), np.asarray(cost)[:, None], np.asarray(paths)[:, -1, :] / 1000.0])
         self.register_buffer("fixed", torch.tensor(fixed, dtype=f32))
-        lay = ObservationLayout(
-            goal=tuple(layout["goal"]),  # type: ignore[arg-type]
-            wind=tuple(layout["wind"]),  # type: ignore[arg-type]
-            thermals=tuple(tuple(s) for s in layout["thermals"]),  # type: ignore[arg-type]
-            **{k: float(layout[k]) for k in ("position_scale", "height_scale", "updraft_scale", "wind_scale")},
-        )
+        lay = ObservationLayout.from_dict(layout)
         self.layout = lay
         n_dyn = 6 + 4 * len(lay.thermals)
         self.n_features = fixed.shape[1] + n_dyn
@@ -220,14 +225,15 @@ class PrimitiveScorer(nn.Module):
                 on * torch.clamp(d[:, :, -1] / rad, max=10.0),
             ]
         dt = float(self.times[-1])
+        mean_lift = lift.mean(dim=-1)
         dyn = torch.stack(
             [
                 to_goal[..., 0] / km,
                 to_goal[..., 1] / km,
                 (d_goal - d_now) / km,
                 up_left / km,
-                lift.mean(dim=-1) / lay.updraft_scale,
-                lift.mean(dim=-1) * dt / km,  # height the lift would give [km]
+                mean_lift / lay.updraft_scale,
+                mean_lift * dt / km,  # height the lift would give [km]
                 *per_slot,
             ],
             dim=-1,
