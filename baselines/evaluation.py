@@ -168,7 +168,9 @@ class AgentSpec:
         return {**dict(config.env_kwargs), **dict(self.env_kwargs)}
 
 
-def _file_digest(path: Path) -> str:
+def file_digest(path: Path) -> str:
+    """The first 16 hex digits of the SHA-256 of a file (a model's identity in results records:
+    unlike its modification time, a fresh checkout keeps it)."""
     h = hashlib.sha256()
     with path.open("rb") as fh:
         for chunk in iter(lambda: fh.read(1 << 20), b""):
@@ -244,7 +246,7 @@ def agent_spec(name: str, config: EvalConfig) -> AgentSpec:
             return PPOAgent(path, name=name)
 
         own = ppo_env_kwargs(cfg)
-        settings = {"model": str(path), "sha256": _file_digest(path)}
+        settings = {"model": str(path), "sha256": file_digest(path)}
         if own:
             settings["env_kwargs"] = own
         return AgentSpec(name, cfg["env_id"], make_ppo, settings, own)

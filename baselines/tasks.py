@@ -1,5 +1,6 @@
-"""Results of the soaring tasks: the reference search, the heuristic, a direct flyer and a random agent
-on the held-out scenarios of every task id (``climb-10000 ...``, ``xc-10000 ...``).
+"""Results of the soaring tasks: the reference search, the heuristic, a direct flyer, a random agent
+and, where a goal exists, the SST planner, on the held-out scenarios of every task id (``climb-10000
+...``, ``xc-10000 ...``).
 
 Every agent flies through ``env.step``; the reference's plan too (replayed action by action: its
 predicted energy and the env's agree bit for bit, which :func:`run_task_job` checks). Scores:
@@ -13,6 +14,7 @@ predicted energy and the env's agree bit for bit, which :func:`run_task_job` che
 
 from __future__ import annotations
 
+import json
 import math
 import statistics
 from collections.abc import Mapping, Sequence
@@ -24,8 +26,15 @@ import gymnasium as gym
 import numpy as np
 
 from baselines._runs import read_json
-from baselines.agents import HeuristicAgent, PPOAgent, RandomAgent, ReplayAgent, ThermallingAgent
-from baselines.evaluation import bootstrap_ci, median_circling, ppo_env_kwargs, run_episode
+from baselines.agents import (
+    HeuristicAgent,
+    PPOAgent,
+    RandomAgent,
+    ReplayAgent,
+    SSTPlannerAgent,
+    ThermallingAgent,
+)
+from baselines.evaluation import bootstrap_ci, file_digest, median_circling, ppo_env_kwargs, run_episode
 from baselines.reference.tasks import DEFAULT_BEAM_WIDTH, REFERENCE_VERSION, reference_plan
 from soaring_env._validation import ConfigError, check_choice
 from soaring_env.scenario import HELDOUT_SEED0, get_scenario, heldout_names
@@ -37,7 +46,13 @@ TASK_FAMILIES = {
     "soaring/CrossCountry-v0": "xc",
     "soaring/CrossCountryContinuous-v0": "xc",
 }
-AGENTS = ("reference", "heuristic", "thermalling", "direct", "random")
+AGENTS = ("reference", "heuristic", "thermalling", "direct", "random", "sst")
+#: The agents of a run that names none: SST (minutes per episode) only when asked for.
+DEFAULT_AGENTS = AGENTS[:-1]
+#: SST's iteration budget per planning call (random expansions plus the seeding search's edges,
+#: :class:`~baselines.sst.planner.SeededSST`): an iteration budget makes its episodes deterministic
+#: and independent of the machine's load.
+SST_ITERATIONS = 2_000_000
 #: The label of a trained PPO run's rows (``task_jobs(ppo_runs=...)``): ``"ppo"`` for PPO-continuous,
 #: ``"ppo-<algo>"`` for the others (:func:`ppo_label`).
 PPO = "ppo"
@@ -61,6 +76,8 @@ class TaskJob:
     beam_width: int = DEFAULT_BEAM_WIDTH
     #: the PPO run directory (agents of :data:`PPO_LABELS`; its ``model.zip`` and ``config.json``)
     run: str = ""
+    #: SST's iteration budget per planning call (agent ``"sst"``)
+    sst_iterations: int = SST_ITERATIONS
 
     def key(self) -> str:
         return f"{self.env_id}|{self.scenario}|{self.agent}|{self.seed}"
@@ -71,8 +88,20 @@ class TaskJob:
             return {"beam_width": self.beam_width, "reference_version": REFERENCE_VERSION}
         if self.agent in PPO_LABELS:
             model = Path(self.run) / "model.zip"
-            mtime = model.stat().st_mtime if model.exists() else None
-            return {"run": self.run, "model_mtime": mtime, "record_version": RECORD_VERSION}
+            digest = file_digest(model) if model.exists() else None
+            return {"run": self.run, "sha256": digest, "record_version": RECORD_VERSION}
+        if self.agent == "sst":
+            from baselines.sst.soaring import DEFAULT_SST_CONFIG, SST_CONFIGS, STEERING_VERSION
+
+            sampler = "continuous" if self.env_id.endswith("Continuous-v0") else "primitive"
+            settings = {
+                "iterations": self.sst_iterations,
+                "planner": DEFAULT_SST_CONFIG,
+                "config": SST_CONFIGS[DEFAULT_SST_CONFIG].acting_settings(sampler),
+                "steering": STEERING_VERSION,
+                "record_version": RECORD_VERSION,
+            }
+            return json.loads(json.dumps(settings))  # as a results file holds it (tuples as lists)
         return {"record_version": RECORD_VERSION}
 
 
@@ -83,11 +112,13 @@ def task_jobs(
     beam_width: int = DEFAULT_BEAM_WIDTH,
     ppo_runs: Sequence[str] = (),
     first_seed: int = HELDOUT_SEED0,
+    sst_iterations: int = SST_ITERATIONS,
 ) -> list[TaskJob]:
     """Every (task id, held-out scenario, agent) job, seed 0; each PPO run directory adds an agent
     (:func:`ppo_label`) on the task id it was trained on (its ``config.json``). ``first_seed``:
     the scenarios' first seed (:data:`~soaring_env.scenario.VALIDATION_SEED0`: the validation
-    scenarios, to choose a policy without looking at the test set)."""
+    scenarios, to choose a policy without looking at the test set). ``"direct"`` and ``"sst"``
+    fly only where there is a goal (cross-country)."""
     for e in env_ids:
         check_choice("env_id", e, tuple(TASK_FAMILIES))
     for a in agents:
@@ -111,9 +142,9 @@ def task_jobs(
         fam = TASK_FAMILIES[env_id]
         for sc in heldout_names(n_scenarios, start=first_seed, family=fam):
             for agent in agents:
-                if agent == "direct" and fam != "xc":
+                if agent in ("direct", "sst") and fam != "xc":
                     continue  # no goal to fly to
-                jobs.append(TaskJob(env_id, sc, agent, 0, beam_width))
+                jobs.append(TaskJob(env_id, sc, agent, 0, beam_width, sst_iterations=sst_iterations))
             for label, run in runs.get(env_id, {}).items():
                 jobs.append(TaskJob(env_id, sc, label, 0, beam_width, run))
     return jobs
@@ -149,6 +180,8 @@ def run_task_job(job: TaskJob) -> dict[str, Any]:
         agent = ThermallingAgent()
     elif job.agent == "direct":
         agent = HeuristicAgent(lift_threshold=math.inf, name="direct")  # never circles
+    elif job.agent == "sst":  # the default (seeded) configuration; the sampler follows the action space
+        agent = SSTPlannerAgent(time_limit=None, max_iterations=job.sst_iterations, name="sst")
     elif is_ppo:
         agent = PPOAgent(job.run, name=job.agent)
     else:

@@ -46,7 +46,10 @@ from soaring_env.scenario import Scenario, paper_scenario
 FLYING, GOAL, CRASH, OUT_OF_BOUNDS = 0, 1, 2, 3
 #: Episode outcome of the cross-country task's envs (never an edge's: the battery is the env's).
 BATTERY_EMPTY = 4
-OUTCOMES = ("flying", "goal", "crash", "out_of_bounds", "battery_empty")
+#: Episode outcome of the primitive envs with a stall limit: the agent chose a primitive the wing
+#: cannot fly (:meth:`SoaringModel.stall_ok`; masked agents never do).
+STALL = 5
+OUTCOMES = ("flying", "goal", "crash", "out_of_bounds", "battery_empty", "stall")
 
 #: Layout of the classification row (:func:`classify_params`): goal north, east, height, radius [m],
 #: domain north min/max, east min/max, height max [m]. Longer rows (the envs') start with it.

@@ -739,15 +739,9 @@ def test_goal_reaching_at_ts10_plans_and_clones_in_its_own_env(tmp_path: Path) -
     folder made with other keywords is planned again rather than mixed."""
     from baselines.ppo import control_grid, grid_index
     from baselines.reference import control_set
+    from baselines.reference.beam import GOAL_PHYSICAL_GAMMAS_DEG, XC_SPEEDS, XC_TURNS_DEG
     from baselines.reference.runner import run_references
-    from baselines.reference.tasks import (
-        GOAL_PHYSICAL_GAMMAS_DEG,
-        XC_PROGRESS_WEIGHT,
-        XC_SPEEDS,
-        XC_TURNS_DEG,
-        reference_config,
-        task_reference,
-    )
+    from baselines.reference.tasks import XC_PROGRESS_WEIGHT, reference_config, task_reference
 
     env = gym.make(CONTINUOUS_ID, **TS10)
     cfg = reference_config(env, 16)

@@ -337,3 +337,77 @@ def test_tasks_script_writes_replays_and_resumes(tmp_path, capsys) -> None:
     for bad in (["--scenarios", "0"], ["--envs", "soaring/Nope-v0"], ["--split", "test"]):
         with pytest.raises(SystemExit):
             main([*bad, "--out", str(tmp_path)])
+
+
+def test_episode_steps_is_the_step_or_time_limit_whichever_ends_first() -> None:
+    """``episode_steps``: goal reaching's 40 steps; a task's time limit over Ts (600 s / 30 s, 3600 s /
+    10 s); a smaller ``max_steps`` wins; what the planners plan within (SST and the reference)."""
+    assert gym.make("soaring/Soaring-v0").unwrapped.episode_steps == 40
+    assert gym.make("soaring/Soaring-v0", max_steps=None).unwrapped.episode_steps is None
+    climb = gym.make("soaring/ThermalClimb-v0").unwrapped
+    assert climb.episode_steps == round(climb.config.time_limit / 30.0)
+    xc = gym.make("soaring/CrossCountryContinuous-v0").unwrapped
+    assert xc.episode_steps == round(xc.config.time_limit / xc.config.duration) == 360
+    assert gym.make("soaring/CrossCountryContinuous-v0", max_steps=7).unwrapped.episode_steps == 7
+    env = gym.make("soaring/CrossCountryContinuous-v0", max_steps=3)
+    env.reset(seed=0)
+    steps = 0
+    while True:
+        steps += 1
+        *_, terminated, truncated, _ = env.step(np.zeros(3, np.float32))
+        if terminated or truncated:
+            break
+    assert steps == 3 and truncated
+
+
+def test_sst_flies_where_a_goal_exists_within_the_episode_and_deterministically() -> None:
+    """The tasks table's SST: cross-country ids only, its iteration budget and configuration in the
+    record's settings; on the physical envelope its seeding beams use a grid inside it; its plans
+    stay within the env's steps (``episode_steps``), and a rerun flies the same episode."""
+    from baselines.agents import SSTPlannerAgent
+    from baselines.evaluation import run_episode
+    from baselines.reference.beam import envelope_grid
+    from baselines.tasks import TaskJob, task_jobs
+
+    ids = ["soaring/ThermalClimbContinuous-v0", "soaring/CrossCountryContinuous-v0"]
+    jobs = task_jobs(ids, 1, ["sst", "random"], sst_iterations=5000)
+    assert [(j.env_id, j.agent) for j in jobs] == [(ids[0], "random"), (ids[1], "sst"), (ids[1], "random")]
+    s = jobs[1].settings()
+    assert s["iterations"] == 5000 and s["planner"] == "seeded" and s["config"]["seed_width"] > 0
+    assert TaskJob(ids[1], "xc-10000", "sst", 0, sst_iterations=6000).settings() != s
+    assert envelope_grid(gym.make(ids[1]).unwrapped.model)["speeds"][0] >= 12.0  # the physical envelope
+    assert envelope_grid(gym.make("soaring/SoaringContinuous-v0").unwrapped.model) == {}  # the paper's
+    sc = get_scenario("xc-10000")
+    recs = []
+    for _ in range(2):
+        env = gym.make(ids[1], max_steps=4)
+        agent = SSTPlannerAgent(time_limit=None, max_iterations=5000, name="sst")
+        recs.append(run_episode(env, agent, sc, 0))
+        assert agent.planner.plan_ is not None and len(agent.planner.plan_) <= 4
+    assert recs[0]["decisions"] == 4 and recs[0]["truncated"]
+    assert recs[0]["energy_spent"] == recs[1]["energy_spent"] and recs[0]["path"] == recs[1]["path"]
+
+
+@pytest.mark.parametrize("env_id", ["soaring/ThermalClimb-v0", "soaring/CrossCountry-v0"])
+def test_a_primitive_past_the_stall_limit_ends_the_episode(env_id: str) -> None:
+    """The primitive task ids have a stall limit: flying a primitive the masks remove for it ends
+    the episode ("stall", the crash penalty), in the single and the batched env alike; an allowed
+    primitive flies on. Goal reaching (no stall limit) has no such outcome."""
+    env = gym.make(env_id)
+    env.reset(seed=3)
+    stalls = ~env.unwrapped.model.stall_ok()
+    masks = env.unwrapped.action_masks()
+    bad, good = int(np.flatnonzero(stalls)[0]), int(np.flatnonzero(masks)[0])
+    assert stalls.sum() == 69 and not masks[stalls].any()
+    *_, terminated, _, info = env.step(bad)
+    assert terminated and info["outcome"] == "stall" and info["reward_terms"]["stall"] == -25.0
+    env.reset(seed=3)
+    *_, terminated, _, info = env.step(good)
+    assert not terminated and info["reward_terms"]["stall"] == 0.0
+    vec = gym.make_vec(env_id, num_envs=2)
+    vec.reset(seed=[3, 4])
+    _, _, terminated, _, infos = vec.step(np.array([bad, good]))
+    assert terminated.tolist() == [True, False] and list(infos["outcome"]) == ["stall", "flying"]
+    goal = gym.make("soaring/Soaring-v0")
+    goal.reset(seed=0)
+    assert "stall" not in goal.step(0)[4]["reward_terms"]

@@ -1,11 +1,13 @@
 """The tasks' results table: reference search, heuristic, direct flyer and random agent on the held-out
-scenarios of every task id (thermal climb, cross-country; primitives and continuous).
+scenarios of every task id (thermal climb, cross-country; primitives and continuous); the SST planner
+on the cross-country ids when asked for (``--agents ... sst``).
 
     python scripts/tasks.py                       # 10 held-out scenarios per task id, all agents
     python scripts/tasks.py --scenarios 3 --envs soaring/ThermalClimbContinuous-v0
     python scripts/tasks.py --beam-width 1000     # the reference's accuracy knob
     python scripts/tasks.py --convergence         # climb-10000, xc-10000: reference at 1/2, 1, 2 x the width
     python scripts/tasks.py --ppo results/ppo-climb/continuous   # adds a trained PPO run's rows
+    python scripts/tasks.py --agents sst --envs soaring/CrossCountryContinuous-v0   # SST's rows
     python scripts/tasks.py --split validation --ppo RUN --out DIR   # validation scenarios (xc-5000, ...)
 
 Writes ``results/tasks/results.json`` (every episode, atomically after each; a rerun resumes and
@@ -27,8 +29,10 @@ from baselines._runs import DirLock, add_backend_args, check_cli_args, cli_worke
 from baselines.backends import run_jobs
 from baselines.tasks import (
     AGENTS,
+    DEFAULT_AGENTS,
     DEFAULT_BEAM_WIDTH,
     FIGURE_SCENARIO,
+    SST_ITERATIONS,
     TASK_FAMILIES,
     TaskJob,
     check_episodes,
@@ -57,7 +61,19 @@ def main(argv: list[str] | None = None) -> int:
         default="heldout",
         help="held-out test scenarios <family>-10000 ... (default) or validation ones <family>-5000 ...",
     )
-    p.add_argument("--agents", nargs="+", choices=AGENTS, default=list(AGENTS), help="agents")
+    p.add_argument(
+        "--agents",
+        nargs="+",
+        choices=AGENTS,
+        default=list(DEFAULT_AGENTS),
+        help=f"agents (default: {' '.join(DEFAULT_AGENTS)}; 'sst' flies the cross-country ids only)",
+    )
+    p.add_argument(
+        "--sst-iterations",
+        type=int,
+        default=SST_ITERATIONS,
+        help=f"SST's iteration budget per planning call (default {SST_ITERATIONS:,}: deterministic)",
+    )
     p.add_argument("--beam-width", type=int, default=DEFAULT_BEAM_WIDTH, help="the reference search's accuracy knob")
     p.add_argument(
         "--ppo", nargs="+", default=[], metavar="RUN", help="PPO run directories (scripts/train_ppo.py --task ...)"
@@ -68,11 +84,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-figures", action="store_true", help="skip trajectories.png")
     args = p.parse_args(argv)
-    check_cli_args(p, args, counts=("scenarios", "beam_width"), dirs=("out",))
+    check_cli_args(p, args, counts=("scenarios", "beam_width", "sst_iterations"), dirs=("out",))
     try:
         if args.convergence:
             return _convergence(args)
-        jobs = task_jobs(args.envs, args.scenarios, args.agents, args.beam_width, args.ppo, SPLITS[args.split])
+        jobs = task_jobs(
+            args.envs, args.scenarios, args.agents, args.beam_width, args.ppo, SPLITS[args.split], args.sst_iterations
+        )
         return _run(jobs, args)
     except ConfigError as exc:
         p.error(str(exc))
@@ -166,6 +184,9 @@ def _figure(episodes: list[dict[str, Any]], path: Path) -> None:
         "random": "0.5",
         "ppo": "#8e44ad",
         "ppo-grid": "#e6007e",
+        "ppo-discrete": "#b8860b",
+        "ppo-masked": "#6b8e23",
+        "sst": "#000000",
     }
     for ax, env_id in zip(axes.ravel(), ids, strict=False):
         first = FIGURE_SCENARIO[TASK_FAMILIES[env_id]]

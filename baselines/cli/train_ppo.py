@@ -13,7 +13,8 @@ Examples::
 
 Each variant writes ``<out>/<algo>/``: ``model.zip``, ``best_model.zip``, ``config.json`` (the
 exact configuration, versions and timings), ``eval_log.json``, ``evaluations.npz``,
-``learning_curve.png`` and ``checkpoints/``; ``<out>/learning_curve.png`` overlays all variants.
+``learning_curve.png`` and ``checkpoints/``; ``<out>/learning_curve.png`` overlays all variants
+(those trained into ``<out>`` by earlier runs too).
 With several ``--seeds`` each seed is a job of its own, training its variants one after another
 into ``<out>/seed-<seed>/<algo>/`` (the same layout below ``<out>/seed-<seed>``: pass that folder
 to ``scripts/evaluate.py --ppo-root``); torch uses one thread per job; ``--minutes`` caps each seed
@@ -194,12 +195,18 @@ def main(argv: list[str] | None = None) -> int:
     except ConfigError as exc:  # e.g. ray not installed, or no Ray cluster at --address
         p.error(str(exc))
     total = time.perf_counter() - t0
+    # the other variants trained into this root before keep their curves in the overlay
+    for algo in ALGOS:
+        earlier = root / algo / "eval_log.json"
+        if earlier.is_file() and earlier not in logs:
+            logs.append(earlier)
+            labels.append(algo)
     if logs:
         try:
             png = plot_learning_curve(
                 logs,
                 root / "learning_curve.png",
-                title=f"PPO on the soaring envs: validation curves ({total / 60:.1f} min of training in total)",
+                title=f"PPO on the soaring envs: validation curves (this run: {total / 60:.1f} min of training)",
                 labels=labels,
             )
             print(f"[train_ppo] learning curve: {png}")

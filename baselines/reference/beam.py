@@ -86,6 +86,15 @@ from soaring_env.model import SoaringModel
 from soaring_env.physics.atmosphere import G
 from soaring_env.primitives import COL_AIRSPEED, COL_CHI_DOT_1, COL_CHI_DOT_2
 
+#: The continuous grid on the physical envelope (:func:`envelope_grid`; the cross-country reference's
+#: for Ts = 10 s): airspeeds [m/s] x course changes per step [deg] (clipped to the bank and stall
+#: limits), with the zero-thrust glide angle (cross-country: and level flight).
+XC_SPEEDS = (12.5, 15.0, 18.0, 22.0)
+XC_TURNS_DEG = (-300.0, -150.0, -60.0, 0.0, 60.0, 150.0, 300.0)
+#: Fixed path angles [deg] of goal reaching's control set on the physical envelope (beside the
+#: zero-thrust glide angle): level and a 10-degree powered climb -- without a battery, a goal above
+#: the start and out of a thermal's reach is climbed to under power.
+GOAL_PHYSICAL_GAMMAS_DEG = (0.0, 10.0)
 #: Default grid of the continuous control set: airspeeds [m/s], course change per Ts [deg], and the
 #: fixed path angles [deg] (the primitives'); the zero-thrust glide angle is added per pair.
 CONTINUOUS_SPEEDS = (10.0, 12.5, 15.0, 17.5, 20.0)
@@ -247,6 +256,20 @@ class SearchResult:
     depth: int
     n_controls: int
     stopped: bool = False
+
+
+def envelope_grid(model: SoaringModel) -> dict[str, Any]:
+    """The continuous control grid of a goal search (the seeded SST's seeding beams, the tasks'
+    references) for ``model``, as :class:`ReferenceConfig` keywords: none (the yardstick's grid)
+    where the model's envelope holds it (the paper's), else the cross-country grid with a powered
+    climb (:data:`XC_SPEEDS` x :data:`XC_TURNS_DEG` x :data:`GOAL_PHYSICAL_GAMMAS_DEG`; the physical
+    envelope excludes the yardstick's 10 m/s and 1080-degree controls)."""
+    lo, hi = model.control_low, model.control_high
+    d = ReferenceConfig()
+    turn_max = math.radians(max(abs(t) for t in d.turns_deg)) / model.library.duration
+    if lo[0] <= min(d.speeds) and max(d.speeds) <= hi[0] and turn_max <= hi[1] + 1e-12:
+        return {}
+    return {"speeds": XC_SPEEDS, "turns_deg": XC_TURNS_DEG, "gammas_deg": GOAL_PHYSICAL_GAMMAS_DEG}
 
 
 def control_set(model: SoaringModel, sampler: str, config: ReferenceConfig) -> np.ndarray:

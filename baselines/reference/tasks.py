@@ -26,7 +26,13 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from baselines.reference.beam import ReferenceConfig, search
+from baselines.reference.beam import (
+    XC_SPEEDS,
+    XC_TURNS_DEG,
+    ReferenceConfig,
+    envelope_grid,
+    search,
+)
 from baselines.reference.bounds import lower_bound, without_thermals
 from baselines.reference.horizon import HorizonConfig, energy_search
 from baselines.reference.yardstick import SamplerReference, ScenarioReference, sampler_config
@@ -35,11 +41,8 @@ from soaring_env.scenario import Scenario
 
 #: Beam width of the tasks' reference searches (the accuracy knob; ``scripts/tasks.py --beam-width``).
 DEFAULT_BEAM_WIDTH = 500
-#: The cross-country reference's continuous control set for Ts = 10 s: the beam's grid of airspeeds
-#: [m/s] x course changes per step [deg] (clipped to the bank and stall limits), level and at the
-#: zero-thrust glide angle; and the ranking's progress weight (see ReferenceConfig.progress_weight).
-XC_SPEEDS = (12.5, 15.0, 18.0, 22.0)
-XC_TURNS_DEG = (-300.0, -150.0, -60.0, 0.0, 60.0, 150.0, 300.0)
+#: The cross-country ranking's progress weight (see ReferenceConfig.progress_weight); its grid:
+#: :data:`~baselines.reference.beam.XC_SPEEDS` x :data:`~baselines.reference.beam.XC_TURNS_DEG`.
 XC_PROGRESS_WEIGHT = 0.5
 #: First beam width of the cross-country reference's iterative widening (then doubled up to the knob).
 XC_START_WIDTH = 125
@@ -53,10 +56,6 @@ XC_DEMO_TIME_WEIGHT = 1.0
 #: plans glide to a thermal with little height to spare (some within metres of the ground), a
 #: margin a cloned policy's judgement does not have; above the floor it can still motor on.
 XC_DEMO_MIN_HEIGHT = 150.0
-#: Fixed path angles [deg] of goal reaching's control set on the physical envelope (beside the
-#: zero-thrust glide angle): level and a 10-degree powered climb -- without a battery, a goal above
-#: the start and out of a thermal's reach is climbed to under power.
-GOAL_PHYSICAL_GAMMAS_DEG = (0.0, 10.0)
 #: Bumped when the tasks' reference settings change (records of another version are redone).
 REFERENCE_VERSION = 2
 
@@ -91,16 +90,11 @@ def reference_config(
         return HorizonConfig(beam_width=beam_width)
     if not xc:
         cfg = goal_config(beam_width)
-        if base.continuous and base.config.envelope == "physical":
+        grid = envelope_grid(base.model) if base.continuous else {}
+        if grid:
             # measured on held-out scenarios at Ts = 10 s: without the progress term the beam keeps
             # the straight glide and misses the climbs the 30 s yardstick finds (README, round six)
-            cfg = dataclasses.replace(
-                cfg,
-                speeds=XC_SPEEDS,
-                turns_deg=XC_TURNS_DEG,
-                gammas_deg=GOAL_PHYSICAL_GAMMAS_DEG,
-                progress_weight=XC_PROGRESS_WEIGHT,
-            )
+            cfg = dataclasses.replace(cfg, **grid, progress_weight=XC_PROGRESS_WEIGHT)
         return dataclasses.replace(cfg, max_edges=_episode_steps(base), time_weight=time_weight, min_height=min_height)
     steps = _episode_steps(base)
     # iterative widening from a fixed first width: the best plan can only improve as the knob doubles
@@ -111,12 +105,10 @@ def reference_config(
 
 
 def _episode_steps(base: Any) -> int:
-    """The most steps an episode of the env ``base`` has: its ``max_steps`` or its time limit
-    over the step duration, whichever ends it first (neither: the search's default depth)."""
-    limits = [int(base.config.max_steps)] if base.config.max_steps is not None else []
-    if base.config.time_limit is not None:
-        limits.append(int(round(base.config.time_limit / base.library.duration)))
-    return min(limits) if limits else ReferenceConfig.max_edges
+    """The most steps an episode of the env ``base`` has (:attr:`~soaring_env.env.core.SoaringBaseEnv.episode_steps`;
+    neither a step nor a time limit: the search's default depth)."""
+    steps = base.episode_steps
+    return ReferenceConfig.max_edges if steps is None else int(steps)
 
 
 def reference_plan(

@@ -38,8 +38,8 @@ class SSTAgent:
     :param max_iterations: iteration budget per plan (deterministic plans; at least one budget).
     :param seed: planner seed; the k-th plan of the agent uses ``seed + k``.
     :param config: planner settings (radii, distance weights, batch size). Unless it sets
-        ``max_edges``, plans are limited to the steps left before the env's ``max_steps`` (or an
-        outer ``TimeLimit``'s ``max_episode_steps``).
+        ``max_edges``, plans are limited to the steps left before the env's ``max_steps`` or
+        ``time_limit`` (``episode_steps``) or an outer ``TimeLimit``'s ``max_episode_steps``.
     """
 
     def __init__(
@@ -74,7 +74,7 @@ class SSTAgent:
         vp = getattr(u, "airspeed_prev", None)
         vp = None if vp is None or not np.isfinite(vp) else float(vp)
         cfg = self.config or SoaringSSTConfig()
-        limit = getattr(getattr(u, "config", None), "max_steps", None)
+        limit = getattr(u, "episode_steps", None)  # the env's step or time limit
         spec_limit = getattr(getattr(self.env, "spec", None), "max_episode_steps", None)  # a TimeLimit
         if spec_limit is not None:
             limit = spec_limit if limit is None else min(int(limit), int(spec_limit))

@@ -73,7 +73,7 @@ class SeededSST(SST):
         """As :meth:`SST.run`; the first call seeds the tree (see the class docstring)."""
         if self.seeded:
             return super().run(time_limit, max_iterations, callback=callback)
-        from baselines.reference.beam import ReferenceConfig, search  # (the layer above: see the module)
+        from baselines.reference.beam import ReferenceConfig, envelope_grid, search  # (the layer above: see the module)
         from baselines.reference.polish import polish
 
         t_lim, n_lim = check_budget(time_limit, max_iterations)
@@ -110,6 +110,8 @@ class SeededSST(SST):
         last_w = 1
         # the polish is for the primitive sampler only (see SoaringSSTConfig.seed_polish)
         polish_depth = cfg.seed_polish if p.kind == "primitive" else 0
+        # a continuous grid inside the model's envelope (the physical one excludes the paper's)
+        grid = envelope_grid(p.model) if p.kind == "continuous" else {}
         beam_share = cfg.seed_share - (cfg.seed_polish_share if polish_depth else 0.0)
         for width in seed_widths(cfg):
             share_t = None if t_lim is None else beam_share * t_lim - (time.perf_counter() - t_start)
@@ -122,7 +124,11 @@ class SeededSST(SST):
                 p.model,
                 p.kind,
                 ReferenceConfig(
-                    beam_width=width, start_width=width, max_edges=max_edges, progress_weight=cfg.seed_progress_weight
+                    beam_width=width,
+                    start_width=width,
+                    max_edges=max_edges,
+                    progress_weight=cfg.seed_progress_weight,
+                    **grid,
                 ),
                 seed_controls=[best.controls] if best.solved else [],
                 **here,

@@ -31,7 +31,7 @@ from soaring_env.env.observation import (
     sensor_noise,
 )
 from soaring_env.env.scenario_batch import ScenarioSampler, batched_draws, scenario_from_row
-from soaring_env.model import BATTERY_EMPTY, OUTCOMES, SoaringModel
+from soaring_env.model import BATTERY_EMPTY, OUTCOMES, STALL, SoaringModel
 from soaring_env.physics.atmosphere import G
 from soaring_env.physics.thermals import PACKED_COLUMNS, WindField
 from soaring_env.primitives import N_PRIMITIVES, ControlEnvelope, PrimitiveLibrary
@@ -268,7 +268,7 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         self._settle = bool(cfg.settle_height)
         if self._settle and not self.has_goal:
             raise ConfigError(f"settle_height=True needs a goal; {type(self).__name__} has none (allowed: False)")
-        # Terminal reward terms indexed by the outcome code (FLYING, GOAL, CRASH, OUT_OF_BOUNDS, BATTERY_EMPTY).
+        # Terminal reward terms indexed by the outcome code (model.OUTCOMES).
         self._terminal = {
             name: np.array([value if code == c else 0.0 for c in range(len(OUTCOMES))])
             for name, code, value in self._terminal_terms()
@@ -307,6 +307,15 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         the last ``MAX_PATH_EDGES`` edges only, on longer episodes)."""
         return np.concatenate(self._path, axis=0)
 
+    @property
+    def episode_steps(self) -> int | None:
+        """The most steps an episode has: ``max_steps`` or ``time_limit`` over Ts [s], whichever
+        ends it first (None: neither is set). Planners plan within ``episode_steps - steps``."""
+        limits = [] if self.config.max_steps is None else [int(self.config.max_steps)]
+        if self.config.time_limit is not None:
+            limits.append(int(round(self.config.time_limit / self.library.duration)))
+        return min(limits) if limits else None
+
     def _make_action_space(self) -> spaces.Space:
         raise NotImplementedError
 
@@ -320,13 +329,17 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         return cfg.generator(np.random.default_rng(0), **dict(cfg.random_scenario))
 
     def _terminal_terms(self) -> list[tuple[str, int, float]]:
-        """(reward-term name, outcome code, value) of the terminal rewards."""
+        """(reward-term name, outcome code, value) of the terminal rewards; ``stall`` (the crash
+        penalty) only on the primitive envs with a stall limit."""
         cfg = self.config
-        return [
+        terms = [
             ("goal", GOAL, float(cfg.goal_bonus)),
             ("crash", CRASH, -float(cfg.crash_penalty)),
             ("out_of_bounds", OUT_OF_BOUNDS, -float(cfg.out_of_bounds_penalty)),
         ]
+        if not self.continuous and cfg.aircraft.cl_max is not None:
+            terms.append(("stall", STALL, -float(cfg.crash_penalty)))
+        return terms
 
     def battery_budget(self, scenario: Scenario) -> float:
         """The motor energy [J/kg] an episode in ``scenario`` may spend (inf: no battery limit)."""
@@ -419,6 +432,8 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         self._th = np.ascontiguousarray(sc.field.packed[None, :, :])
         self._nth = np.array([len(sc.field.thermals)], dtype=np.int64)
         self._allowed = self.model.allowed_primitives()
+        #: (174,) bool: the primitives past the stall limit (flying one ends the episode: "stall")
+        self._stalls = ~self.model.stall_ok()
 
     def _draw_random(self) -> Scenario:
         """A new random scenario from ``self.np_random``: ``draw_scenario_arrays(np_random, 1)``, the
@@ -552,6 +567,8 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
             self.battery_left -= fuel + kinetic
             if code == FLYING and self.battery_left <= 0.0:
                 code = BATTERY_EMPTY
+        if primitive is not None and self._stalls[primitive]:  # the wing cannot fly it: whatever the edge did
+            code = STALL
         if self._extras or self._hist_len:
             self._push_history(
                 self._history,

@@ -17,7 +17,7 @@ from soaring_env._validation import check_finite, check_range
 from soaring_env.env.config import ScenarioSpec, SoaringEnvConfig
 from soaring_env.env.core import SoaringBaseEnv, SoaringContinuousEnv, SoaringEnv
 from soaring_env.env.vector import SoaringContinuousVectorEnv, SoaringVectorEnv
-from soaring_env.model import BATTERY_EMPTY, CRASH, OUT_OF_BOUNDS
+from soaring_env.model import BATTERY_EMPTY, GOAL
 from soaring_env.physics.aircraft import TEMPEST_CL_MAX, Aircraft
 from soaring_env.scenario import Scenario, make_climb_scenario, make_cross_country_scenario
 
@@ -117,11 +117,7 @@ class _ThermalClimb(SoaringBaseEnv):
     has_goal: ClassVar[bool] = False
 
     def _terminal_terms(self) -> list[tuple[str, int, float]]:
-        cfg = self.config
-        return [
-            ("crash", CRASH, -float(cfg.crash_penalty)),
-            ("out_of_bounds", OUT_OF_BOUNDS, -float(cfg.out_of_bounds_penalty)),
-        ]
+        return [t for t in super()._terminal_terms() if t[1] != GOAL]  # no goal, no bonus
 
 
 class _CrossCountry(SoaringBaseEnv):
@@ -158,7 +154,8 @@ _CLIMB_DOC = """Thermal climb: gain as much specific energy as possible in a fix
     :class:`~soaring_env.env.core.SoaringEnv`). The aircraft has a stall limit (C_L,max = 1.27):
     :meth:`action_masks` masks the primitives that would stall (69 of the 87 at 10 m/s: all but the
     +-45 deg straights, curves and 180 deg spirals, whose path angle unloads the wing), hit the ground,
-    leave the domain or exceed the bank limit.
+    leave the domain or exceed the bank limit. An agent that flies a primitive past the stall limit
+    anyway ends the episode (``info["outcome"] == "stall"``).
 
     ``soaring/ThermalClimbContinuous-v0``: ``Box(-1, 1, (3,), float32)`` held for Ts = 5 s
     (``duration``, 1-30 s), mapped onto the physical envelope
@@ -177,7 +174,8 @@ _CLIMB_DOC = """Thermal climb: gain as much specific energy as possible in a fix
     ## Rewards
 
     ``energy`` = -edge cost / 1000 (kJ/kg) per step; ``crash`` -25 on ground contact,
-    ``out_of_bounds`` -25 on leaving the domain. The episode's energy return is
+    ``out_of_bounds`` -25 on leaving the domain, ``stall`` -25 (``crash_penalty``; primitives only)
+    on a primitive past the stall limit. The episode's energy return is
     ``-info["energy_spent"] / 1000``.
 
     ## Starting State
@@ -187,12 +185,15 @@ _CLIMB_DOC = """Thermal climb: gain as much specific energy as possible in a fix
 
     ## Episode End
 
-    Terminated on ground contact or leaving the domain; truncated by the env itself when the flight
-    time reaches ``time_limit`` (a ``step`` after that raises until ``reset``).
+    Terminated on ground contact, on leaving the domain or on a stall (primitives: the edge is
+    flown and charged, then the episode ends); truncated by the env itself when the flight time
+    reaches ``time_limit`` (a ``step`` after that raises until ``reset``).
 
     ## Version History
 
-    * v0: initial version.
+    * v0: initial version. 2026-12-05: a primitive past the stall limit ends the episode
+      (``"stall"``); before, the primitive env flew it as if the wing could (no published result
+      flew one: every masked agent, planner and hand-written agent avoids them).
     """
 
 _XC_DOC = """Energy-limited cross-country: reach a goal 8-15 km away on a battery too small to motor there.
@@ -218,7 +219,8 @@ _XC_DOC = """Energy-limited cross-country: reach a goal 8-15 km away on a batter
     ## Rewards
 
     As goal reaching (energy, progress shaping, ``goal`` +25, ``crash`` -25, ``out_of_bounds`` -25)
-    plus ``battery_empty`` -25 (``battery_penalty``).
+    plus ``battery_empty`` -25 (``battery_penalty``) and, on the primitives, ``stall`` -25 as in the
+    thermal climb.
 
     ## Starting State
 
@@ -226,14 +228,15 @@ _XC_DOC = """Energy-limited cross-country: reach a goal 8-15 km away on a batter
 
     ## Episode End
 
-    Terminated at the goal (success), on ground contact, on leaving the domain, or when the battery
+    Terminated at the goal (success), on ground contact, on leaving the domain, on a stall
+    (primitives, as in the thermal climb), or when the battery
     is empty (``info["outcome"] == "battery_empty"``: the motor energy of the episode, fuel plus the
     speed changes' kinetic charge, reached the budget during the last edge, which is still flown to
     its end); truncated by the env at ``time_limit`` (3600 s). ``info["battery_left"]`` [J/kg].
 
     ## Version History
 
-    * v0: initial version.
+    * v0: initial version. 2026-12-05: the stall outcome, as in the thermal climb.
     """
 
 

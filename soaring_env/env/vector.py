@@ -54,7 +54,7 @@ from soaring_env.env.scenario_batch import (
     scenario_from_row,
     set_generator,
 )
-from soaring_env.model import BATTERY_EMPTY, OUTCOMES, SoaringModel
+from soaring_env.model import BATTERY_EMPTY, OUTCOMES, STALL, SoaringModel
 from soaring_env.physics.thermals import PACKED_COLUMNS
 from soaring_env.primitives import N_PRIMITIVES
 from soaring_env.scenario import BATCHED_GENERATORS, Scenario
@@ -200,6 +200,8 @@ class _SoaringVectorBase(VectorEnv):
         if fixed is None and self._batched:
             self._ensure_slots(self._random_sampler().max_thermals)
         self._allowed = tmpl.model.allowed_primitives()
+        #: the primitives past the stall limit (None: none, or a continuous env): as the single env's
+        self._stalls: np.ndarray | None = None if self.continuous or not tmpl._stalls.any() else tmpl._stalls
         self._envelope = tmpl.model.control_envelope
         self._needs_reset = True
         self._obs_last = np.zeros((b, self._n_obs), dtype=np.float32)
@@ -514,6 +516,8 @@ class _SoaringVectorBase(VectorEnv):
         if t.has_battery:
             self.battery_left = self.battery_left - (tt[0] + tt[2])
             codes[(codes == FLYING) & (self.battery_left <= 0.0)] = BATTERY_EMPTY
+        if self._stalls is not None:  # a flown primitive past the stall limit ends the episode
+            codes[self._stalls[np.asarray(actions)] & ~skip] = STALL
         if t._extras or t._hist_len:
             flown = (ks + 1) * t._dt
             lift = self._lift + self._noise[:, 1]
