@@ -213,12 +213,10 @@ def agent_spec(name: str, config: EvalConfig) -> AgentSpec:
             "iterations": config.sst_iterations,
         }
         if planner != "paper":  # (the paper planner's records predate these keys)
-            from baselines.sst.soaring import SST_CONFIGS, STEERING_VERSION
+            from baselines.sst.soaring import planner_record
 
             # a change of the configuration or of the steering rule redoes these episodes on resume
-            settings["planner"] = planner
-            settings["config"] = SST_CONFIGS[planner].acting_settings(sampler)
-            settings["steering"] = STEERING_VERSION
+            settings.update(planner_record(planner, sampler))
 
         def make_sst() -> Any:
             from baselines.agents import SSTPlannerAgent

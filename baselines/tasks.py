@@ -91,14 +91,12 @@ class TaskJob:
             digest = file_digest(model) if model.exists() else None
             return {"run": self.run, "sha256": digest, "record_version": RECORD_VERSION}
         if self.agent == "sst":
-            from baselines.sst.soaring import DEFAULT_SST_CONFIG, SST_CONFIGS, STEERING_VERSION
+            from baselines.sst.soaring import DEFAULT_SST_CONFIG, planner_record
 
             sampler = "continuous" if self.env_id.endswith("Continuous-v0") else "primitive"
             settings = {
                 "iterations": self.sst_iterations,
-                "planner": DEFAULT_SST_CONFIG,
-                "config": SST_CONFIGS[DEFAULT_SST_CONFIG].acting_settings(sampler),
-                "steering": STEERING_VERSION,
+                **planner_record(DEFAULT_SST_CONFIG, sampler),
                 "record_version": RECORD_VERSION,
             }
             return json.loads(json.dumps(settings))  # as a results file holds it (tuples as lists)

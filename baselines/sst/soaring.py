@@ -247,6 +247,13 @@ SST_CONFIGS: dict[str, SoaringSSTConfig] = {
 DEFAULT_SST_CONFIG = "seeded"
 
 
+def planner_record(planner: str, sampler: str) -> dict[str, Any]:
+    """What identifies the named configuration ``planner`` acting with ``sampler`` in a results
+    record (the evaluation's and the tasks' SST episodes): its name, its acting settings and the
+    steering rule's version; a change of either makes such records stale."""
+    return {"planner": planner, "config": SST_CONFIGS[planner].acting_settings(sampler), "steering": STEERING_VERSION}
+
+
 class SoaringProblem:
     """The soaring planning problem for the SST core.
 
