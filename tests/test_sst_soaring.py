@@ -19,7 +19,9 @@ from baselines.sst import (
     make_planner,
     plan_soaring,
 )
-from baselines.sst.soaring import S_T, S_V, SST_CONFIGS
+from baselines.sst.core import EDGE_GOAL, EDGE_INVALID, EDGE_VALID
+from baselines.sst.soaring import S_B, S_T, S_V, SST_CONFIGS
+from soaring_env._validation import ConfigError
 from soaring_env.model import GOAL, SoaringModel
 from soaring_env.scenario import GoalRegion, paper_scenario
 
@@ -296,3 +298,67 @@ def test_classify_points_refuses_other_shapes() -> None:
     for bad in (np.zeros((3, 4)), np.zeros((2, 5, 3)), np.zeros((2, 0, 4)), "abc"):
         with pytest.raises(SSTError, match="points"):
             m.classify_points(bad)
+
+
+def _xc_env(**kwargs):
+    import gymnasium as gym
+
+    import soaring_env  # noqa: F401  (registers the ids)
+
+    return gym.make("soaring/CrossCountryContinuous-v0", scenario="xc-10000", **kwargs)
+
+
+def test_battery_charges_and_ends_edges_as_the_env_does() -> None:
+    """With a battery the state's 7th column is the battery left, charged fuel + kinetic per edge
+    exactly as the env charges it (bit for bit); an edge that empties it is invalid where the env
+    ends the episode ("battery_empty"), and a zero-thrust glide that spends nothing stays valid."""
+    env = _xc_env(battery_fraction=0.004)
+    u = env.unwrapped
+    prob = None
+    outcomes = set()
+    for action in ([1.0, 0.0, 1.0], [0.0, 0.0, 0.0], [-1.0, 0.3, -1.0]):  # climb, level, steep glide
+        env.reset(seed=0)
+        prob = SoaringProblem(u.model, "continuous", start=np.array(u.state), battery=float(u.battery_left))
+        root = prob.root_state()
+        assert root.shape == (7,) and root[S_B] == u.battery_left and prob.space.dim == 7
+        e = prob.propagate(root[None, :], np.array([action]))
+        _, _, terminated, _, info = env.step(np.array(action, np.float32))
+        assert e.states[0, S_B] == u.battery_left  # the same arithmetic
+        empty = info["outcome"] == "battery_empty"
+        assert (int(e.outcome[0]) == EDGE_INVALID) == empty and terminated == empty
+        outcomes.add(empty)
+    assert outcomes == {True, False}  # both cases occurred
+    assert SoaringProblem(u.model, "continuous", start=np.array(u.state)).root_state().shape == (6,)
+
+
+@pytest.mark.parametrize("kind", SAMPLERS)
+def test_plans_keep_within_the_battery(kind: str, model: SoaringModel) -> None:
+    """With half the motor energy the plan without a battery uses, SST (seeding beams, completions
+    and random expansions alike) finds a plan on ``paper`` whose every edge but the goal edge leaves
+    battery (the env's rule), while the plan without one, flown against that battery, empties it."""
+    blind = plan_soaring(model, kind, max_iterations=15_000, seed=1).plan
+
+    def fly(plan: Plan, battery: float) -> tuple[float, list[int]]:
+        prob = SoaringProblem(model, kind, battery=battery)
+        x = prob.root_state()[None, :]
+        outcomes = []
+        for a in plan.actions:
+            e = prob.propagate(x, np.asarray(a, np.float64).reshape(1, -1))
+            outcomes.append(int(e.outcome[0]))
+            x = e.states
+        return battery - float(x[0, S_B]), outcomes
+
+    used, _ = fly(blind, 1e9)
+    battery = 0.5 * used
+    assert EDGE_INVALID in fly(blind, battery)[1]
+    aware = plan_soaring(model, kind, max_iterations=15_000, seed=1, battery=battery).plan
+    assert aware.solved
+    assert fly(aware, battery)[1] == [EDGE_VALID] * (len(aware) - 1) + [EDGE_GOAL]
+
+
+@pytest.mark.parametrize("battery", [0.0, -5.0, math.nan, math.inf, "abc", True])
+def test_bad_battery(battery: object) -> None:
+    env = _xc_env()
+    env.reset(seed=0)
+    with pytest.raises((SSTError, ConfigError), match="battery"):
+        SoaringProblem(env.unwrapped.model, "continuous", start=np.array(env.unwrapped.state), battery=battery)

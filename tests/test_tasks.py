@@ -367,13 +367,23 @@ def test_sst_flies_where_a_goal_exists_within_the_episode_and_deterministically(
     from baselines.agents import SSTPlannerAgent
     from baselines.evaluation import run_episode
     from baselines.reference.beam import envelope_grid
-    from baselines.tasks import TaskJob, task_jobs
+    from baselines.tasks import TaskJob, markdown_table, task_jobs
 
-    ids = ["soaring/ThermalClimbContinuous-v0", "soaring/CrossCountryContinuous-v0"]
+    ids = ["soaring/ThermalClimbContinuous-v0", "soaring/CrossCountryContinuous-v0", "soaring/CrossCountry-v0"]
     jobs = task_jobs(ids, 1, ["sst", "random"], sst_iterations=5000)
-    assert [(j.env_id, j.agent) for j in jobs] == [(ids[0], "random"), (ids[1], "sst"), (ids[1], "random")]
+    assert [(j.env_id, j.agent) for j in jobs] == [
+        (ids[0], "random"),
+        (ids[1], "sst"),
+        (ids[1], "random"),
+        (ids[2], "random"),  # SST_SKIPPED: no primitive plan within the battery exists
+    ]
+    row = {"env_id": ids[1], "agent": "sst", "episodes": 1, "no_plan": 0, "success": 1, "outcomes": {"goal": 1}}
+    row |= {"energy_gained_median": (1.0, 1.0, 1.0), "fraction_of_reference_median": (math.nan,) * 3}
+    row |= {"battery_left_median": 0.5, "circling_in_lift": 0.5}
+    assert "SST does not fly `CrossCountry-v0`: no primitive plan" in markdown_table([row])
     s = jobs[1].settings()
     assert s["iterations"] == 5000 and s["planner"] == "seeded" and s["config"]["seed_width"] > 0
+    assert s["battery_aware"] is True
     assert TaskJob(ids[1], "xc-10000", "sst", 0, sst_iterations=6000).settings() != s
     assert envelope_grid(gym.make(ids[1]).unwrapped.model)["speeds"][0] >= 12.0  # the physical envelope
     assert envelope_grid(gym.make("soaring/SoaringContinuous-v0").unwrapped.model) == {}  # the paper's
@@ -386,6 +396,30 @@ def test_sst_flies_where_a_goal_exists_within_the_episode_and_deterministically(
         assert agent.planner.plan_ is not None and len(agent.planner.plan_) <= 4
     assert recs[0]["decisions"] == 4 and recs[0]["truncated"]
     assert recs[0]["energy_spent"] == recs[1]["energy_spent"] and recs[0]["path"] == recs[1]["path"]
+
+
+def test_sst_agent_plans_with_the_battery_left(monkeypatch: pytest.MonkeyPatch) -> None:
+    """SSTAgent hands the cross-country env's battery left to the planner (None without a battery)."""
+    import baselines.sst.agent as agent_mod
+    from baselines.sst import SSTAgent
+
+    seen: list = []
+    real = agent_mod.plan_soaring
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs["battery"])
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(agent_mod, "plan_soaring", spy)
+    env = gym.make("soaring/CrossCountryContinuous-v0", max_steps=3)
+    env.reset(seed=0)
+    env.step(np.array([0.0, 0.0, 1.0], np.float32))  # a powered climb: the battery left is below the budget
+    SSTAgent(env, time_limit=None, max_iterations=500).plan()
+    assert seen == [env.unwrapped.battery_left] and 0.0 < seen[0] < env.unwrapped.battery
+    env = gym.make("soaring/SoaringContinuous-v0", max_steps=3)
+    env.reset(seed=0)
+    SSTAgent(env, time_limit=None, max_iterations=500).plan()
+    assert seen[1] is None
 
 
 @pytest.mark.parametrize("env_id", ["soaring/ThermalClimb-v0", "soaring/CrossCountry-v0"])

@@ -40,6 +40,9 @@ class SSTAgent:
     :param config: planner settings (radii, distance weights, batch size). Unless it sets
         ``max_edges``, plans are limited to the steps left before the env's ``max_steps`` or
         ``time_limit`` (``episode_steps``) or an outer ``TimeLimit``'s ``max_episode_steps``.
+
+    On a task with a battery (``unwrapped.has_battery``, cross-country) every plan keeps within
+    the battery left (``unwrapped.battery_left``): edges that would empty it are invalid.
     """
 
     def __init__(
@@ -82,6 +85,7 @@ class SSTAgent:
             # plan within the steps the episode has left (the TimeLimit would truncate a longer plan)
             left = max(1, int(limit) - int(getattr(u, "steps", 0)))
             cfg = dataclasses.replace(cfg, max_edges=left)
+        battery = float(u.battery_left) if getattr(u, "has_battery", False) else None
         res = plan_soaring(
             model,
             self.sampler,
@@ -93,6 +97,7 @@ class SSTAgent:
             t0=float(getattr(u, "time", 0.0)),
             airspeed_prev=vp,
             partial=True,
+            battery=battery,
         )
         self.n_plans += 1
         self._vp0 = math.nan if vp is None else vp

@@ -131,6 +131,7 @@ class SeededSST(SST):
                     **grid,
                 ),
                 seed_controls=[best.controls] if best.solved else [],
+                battery=math.inf if p.battery is None else p.battery,
                 **here,
                 time_limit=share_t,
                 max_rollouts=share_n,
@@ -194,6 +195,7 @@ def make_planner(
     t0: float = 0.0,
     airspeed_prev: float | None = None,
     reference: bool = False,
+    battery: float | None = None,
 ) -> tuple[SoaringProblem, SST | ReferenceSST]:
     """Build the soaring problem and an SST planner over it (``reference=True``: the plain
     :class:`ReferenceSST`; ``config.seed_width > 0``: :class:`SeededSST`). Arguments as in
@@ -203,7 +205,7 @@ def make_planner(
     check_bool("reference", reference)
     if reference and cfg.seed_width:
         raise ConfigError(f"reference=True plans without a seeding search; set seed_width=0 (got {cfg.seed_width!r})")
-    problem = SoaringProblem(model, sampler, cfg, start=start, t0=t0, airspeed_prev=airspeed_prev)
+    problem = SoaringProblem(model, sampler, cfg, start=start, t0=t0, airspeed_prev=airspeed_prev, battery=battery)
     params = SSTParams(
         selection_radius=cfg.selection_radius,
         pruning_radius=cfg.pruning_radius,
@@ -257,6 +259,7 @@ def plan_soaring(
     airspeed_prev: float | None = None,
     partial: bool = False,
     reference: bool = False,
+    battery: float | None = None,
 ) -> PlanningResult:
     """Plan from the scenario's start (or ``start``) to its goal region with SST.
 
@@ -273,6 +276,9 @@ def plan_soaring(
     :param partial: if no solution is found, return the path to the tree node nearest the goal
         centre (for receding-horizon use) instead of an empty plan.
     :param reference: use the plain unbatched :class:`ReferenceSST` (slow; for comparisons).
+    :param battery: the motor energy left at the start [J/kg] (the cross-country task's
+        ``battery_left``; None: no battery): edges that empty it are invalid, for the tree and the
+        seeding search alike (:class:`~baselines.sst.soaring.SoaringProblem`).
     :returns: the plan (``plan.solved`` tells whether it reaches the goal) and the statistics;
         no solution within the budget is a normal result.
     """
@@ -285,6 +291,7 @@ def plan_soaring(
         t0=t0,
         airspeed_prev=airspeed_prev,
         reference=reference,
+        battery=battery,
     )
     check_bool("partial", partial)
     res = planner.run(time_limit=time_limit, max_iterations=max_iterations)

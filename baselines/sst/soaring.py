@@ -4,7 +4,8 @@ generic SST core as a :class:`~baselines.sst.core.Problem`.
 State vector seen by the core (6 floats): ``[Pn, Pe, chi, h, t, v_prev]`` -- the model's state
 ``[Pn [m], Pe [m], chi [rad], h [m]]``, the time [s] (it matters for drifting thermals) and the
 airspeed of the edge that led here [m/s] (NaN at the start: the first edge pays no kinetic term,
-as in the env). Only ``Pn, Pe, h, chi`` enter the distance:
+as in the env); with a battery (the cross-country task's motor energy budget) a 7th, the battery
+left [J/kg]. Only ``Pn, Pe, h, chi`` enter the distance:
 
     d^2 = dPn^2 + dPe^2 + (height_scale dh)^2 + (heading_scale wrap(dchi))^2      [m^2]
 
@@ -26,7 +27,9 @@ reference beam searches as well (:class:`baselines.sst.planner.SeededSST`).
 An edge is propagated with the same calls ``env.step`` makes (``model.rollout_primitive`` or
 ``model.rollout_control`` with ``t0`` and ``airspeed_prev``, then ``model.classify``): its cost is
 the full edge cost, its end state the first goal point for goal edges; crash and out-of-bounds
-edges are invalid.
+edges are invalid, and so is, with a battery, an edge that leaves none (the env's
+``"battery_empty"``: the battery is charged fuel + kinetic per edge, exactly as the env charges it;
+a goal edge counts as reached even if it overdraws, as in the env).
 """
 
 from __future__ import annotations
@@ -55,7 +58,7 @@ from soaring_env.primitives import COL_AIRSPEED, COL_CHI_DOT_1, COL_CHI_DOT_2, C
 
 SAMPLERS = ("primitive", "continuous")
 #: Columns of the core's state vector.
-S_N, S_E, S_CHI, S_H, S_T, S_V = range(6)
+S_N, S_E, S_CHI, S_H, S_T, S_V, S_B = range(7)
 
 
 @dataclass(frozen=True)
@@ -264,6 +267,9 @@ class SoaringProblem:
     :param t0: start time [s].
     :param airspeed_prev: airspeed of the edge flown before the start [m/s], or None (no kinetic
         charge for the first edge, as after ``env.reset``).
+    :param battery: the motor energy left at the start [J/kg] (the cross-country task's
+        ``battery_left``), or None: no battery. With one, the state has a 7th column (``S_B``, the
+        battery left) and edges that empty it are invalid (see the module docstring).
     """
 
     def __init__(
@@ -275,6 +281,7 @@ class SoaringProblem:
         start: np.ndarray | None = None,
         t0: float = 0.0,
         airspeed_prev: float | None = None,
+        battery: float | None = None,
     ) -> None:
         if not isinstance(model, SoaringModel):
             raise SSTError(f"model={model!r} must be a soaring_env.model.SoaringModel")
@@ -302,11 +309,18 @@ class SoaringProblem:
             airspeed_prev = check_finite("airspeed_prev", airspeed_prev)
             if not airspeed_prev > 0:
                 raise SSTError(f"airspeed_prev={airspeed_prev!r} must be None or > 0 m/s")
+        if battery is not None:
+            battery = check_finite("battery", battery)
+            if not battery > 0.0:
+                raise SSTError(f"battery={battery!r} must be None or > 0 J/kg (the motor energy left)")
+        #: the motor energy left at the start [J/kg] (None: no battery)
+        self.battery = battery
         check_goal_reachable(model)
-        self._root = np.array([*x0, t0, np.nan if airspeed_prev is None else airspeed_prev])
+        root = [*x0, t0, np.nan if airspeed_prev is None else airspeed_prev]
+        self._root = np.array(root if battery is None else [*root, battery])
         cfg = self.config
         self.space = StateSpace(
-            dim=6,
+            dim=len(self._root),
             dims=(S_N, S_E, S_H, S_CHI),
             scales=(1.0, 1.0, cfg.height_scale, cfg.heading_scale),
             periods=(0.0, 0.0, 0.0, 2 * math.pi),
@@ -675,13 +689,16 @@ class SoaringProblem:
         points, terms = prop.run(np.array(states[:, :4], order="C"), t0, vp, ctrl)
         code, k = m.classify_points(points)
         rows = np.arange(len(k))
-        out = np.empty((len(k), 6))
+        out = np.empty((len(k), states.shape[1]))
         out[:, :4] = points[rows, k]
         # the env advances its clock by Ts per step; a goal edge counts up to its first goal point
         dur = np.where(code == GOAL, self._point_times[k], prop.duration)
         out[:, S_T] = t0 + dur
         out[:, S_V] = v
         outcome = np.where(code == FLYING, EDGE_VALID, np.where(code == GOAL, EDGE_GOAL, EDGE_INVALID))
+        if self.battery is not None:  # the env's charge and test, in its order of operations
+            out[:, S_B] = states[:, S_B] - (terms[:, 0] + terms[:, 2])
+            outcome = np.where((outcome == EDGE_VALID) & (out[:, S_B] <= 0.0), EDGE_INVALID, outcome)
         # no plan ends above h_cap, and fuel + kinetic >= 0: from height h at least -g (h_cap - h) to go
         togo = -G * (self._h_cap - out[:, S_H]) if self.config.cost_bound else None
         return Edges(states=out, cost=terms[:, 3], duration=dur, outcome=outcome, togo=togo)
