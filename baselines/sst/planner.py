@@ -277,8 +277,9 @@ def plan_soaring(
         centre (for receding-horizon use) instead of an empty plan.
     :param reference: use the plain unbatched :class:`ReferenceSST` (slow; for comparisons).
     :param battery: the motor energy left at the start [J/kg] (the cross-country task's
-        ``battery_left``; None: no battery): edges that empty it are invalid, for the tree and the
-        seeding search alike (:class:`~baselines.sst.soaring.SoaringProblem`).
+        ``battery_left``; None: no battery): edges that empty it are invalid
+        (:class:`~baselines.sst.soaring.SoaringProblem`); the seeding beams search within it, and a
+        seed or polished plan that would empty it is not inserted (``insert_path`` flies it again).
     :returns: the plan (``plan.solved`` tells whether it reaches the goal) and the statistics;
         no solution within the budget is a normal result.
     """
