@@ -1,6 +1,7 @@
 """The tasks' results table: reference search, heuristic, direct flyer and random agent on the held-out
 scenarios of every task id (thermal climb, cross-country; primitives and continuous); the SST planner
-on the cross-country ids when asked for (``--agents ... sst``).
+on the continuous cross-country id when asked for (``--agents ... sst``; not on the ids of
+``baselines.tasks.SST_SKIPPED``).
 
     python scripts/tasks.py                       # 10 held-out scenarios per task id, all agents
     python scripts/tasks.py --scenarios 3 --envs soaring/ThermalClimbContinuous-v0
@@ -66,7 +67,7 @@ def main(argv: list[str] | None = None) -> int:
         nargs="+",
         choices=AGENTS,
         default=list(DEFAULT_AGENTS),
-        help=f"agents (default: {' '.join(DEFAULT_AGENTS)}; 'sst' flies the cross-country ids only)",
+        help=f"agents (default: {' '.join(DEFAULT_AGENTS)}; 'sst' flies the continuous cross-country id only)",
     )
     p.add_argument(
         "--sst-iterations",
