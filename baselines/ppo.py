@@ -69,7 +69,7 @@ ALGOS: dict[str, str] = {
     "grid": CONTINUOUS_ID,
 }
 #: Policy parametrisations (``TrainConfig.policy``).
-POLICIES = ("mlp", "scoring")
+POLICIES = ("mlp", "scoring", "successor")
 #: The algorithms that fly the continuous env ids.
 CONTINUOUS_ALGOS = ("continuous", "grid")
 #: Task -> (env id of the primitive algorithms, env id of ``continuous``, scenario family).
@@ -121,8 +121,11 @@ class TrainConfig:
     :param policy: ``"mlp"`` (default: SB3's MLP policy) or ``"scoring"`` (``algo="discrete"`` only:
         :class:`baselines.scoring.PrimitiveScoringPolicy`, each primitive's logit computed by one
         MLP shared by all primitives from the observation and where that primitive would take the
-        aircraft -- its path in the observed wind, relative to the goal and the observed thermals).
-    :param scorer_hidden: with ``policy="scoring"``: the widths of the shared scoring MLP.
+        aircraft -- its path in the observed wind, relative to the goal and the observed thermals),
+        or ``"successor"`` (likewise: :class:`baselines.scoring.SuccessorPolicy`, each primitive
+        flown through the thermals the observation shows and its successor state scored).
+    :param scorer_hidden: with ``policy="scoring"`` or ``"successor"``: the widths of the shared
+        scoring MLP.
     :param log_std_init: initial log standard deviation of the continuous policy.
     :param shaping: weight of this module's extra potential-based shaping (Ng et al. 1999),
         ``shaping * (gamma * phi(s') - phi(s))`` with ``phi = -d_goal / 1 km``; 0 (default) leaves
@@ -251,9 +254,9 @@ class TrainConfig:
         object.__setattr__(self, "net_arch", tuple(int(n) for n in self.net_arch))
         if self.policy not in POLICIES:
             raise ValueError(f"policy={self.policy!r} is unknown; known: {', '.join(POLICIES)}")
-        if self.policy == "scoring" and (self.algo != "discrete" or not self.body_frame or self.task != "goal"):
+        if self.policy != "mlp" and (self.algo != "discrete" or not self.body_frame or self.task != "goal"):
             raise ValueError(
-                f"policy='scoring' needs algo='discrete' on the goal task with body_frame=True "
+                f"policy={self.policy!r} needs algo='discrete' on the goal task with body_frame=True "
                 f"(got algo={self.algo!r}, task={self.task!r}, body_frame={self.body_frame!r})"
             )
         hidden = self.scorer_hidden
@@ -1303,6 +1306,14 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
             policy_kwargs = {
                 "net_arch": {"pi": [], "vf": list(config.net_arch)},
                 "scorer": {**scorer_kwargs(_probe(config)), "hidden": list(config.scorer_hidden)},
+            }
+        elif config.policy == "successor":
+            from baselines.scoring import SuccessorPolicy, successor_kwargs
+
+            policy_cls = SuccessorPolicy
+            policy_kwargs = {
+                "net_arch": {"pi": [], "vf": list(config.net_arch)},
+                "scorer": {**successor_kwargs(_probe(config)), "hidden": list(config.scorer_hidden)},
             }
         model = algo_cls(
             policy_cls,

@@ -17,7 +17,12 @@ fixed function of the observation, so this is an ordinary stochastic policy over
 trained by ordinary PPO; only its parametrisation differs (action features shared across actions,
 as in Q-networks over action embeddings). The critic is the usual MLP.
 
-It reads the body-frame observation (:class:`baselines.ppo.BodyFrame`, the thermal slots of the
+:class:`SuccessorPolicy` (round nine) goes one step further: it flies each primitive through the
+air the observation shows (the observed thermal slots rebuilt into an Allen field, the model's own
+``rollout``) and scores the *successor state* -- its goal and thermal offsets in its own frame, its
+height, the edge's exact cost -- with one MLP shared by all primitives, no per-primitive vectors.
+
+Both read the body-frame observation (:class:`baselines.ppo.BodyFrame`, the thermal slots of the
 privileged tier); its layout is resolved by name when the policy is built.
 """
 
@@ -97,6 +102,10 @@ class ObservationLayout:
     height_scale: float
     updraft_scale: float
     wind_scale: float
+    # read by SuccessorScorer only; -1 in layouts saved before it existed
+    height: int = -1
+    airspeed: int = -1
+    speed_scale: float = 20.0
 
     @classmethod
     def of(cls, names: Sequence[str], config: Any) -> ObservationLayout:
@@ -126,6 +135,9 @@ class ObservationLayout:
             height_scale=float(config.height_scale),
             updraft_scale=float(config.updraft_scale),
             wind_scale=float(config.wind_scale),
+            height=where.get("height", -1),
+            airspeed=where.get("airspeed", -1),
+            speed_scale=float(config.speed_scale),
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -139,6 +151,9 @@ class ObservationLayout:
             wind=tuple(d["wind"]),  # type: ignore[arg-type]
             thermals=tuple(tuple(t) for t in d["thermals"]),  # type: ignore[arg-type]
             **{k: float(d[k]) for k in ("position_scale", "height_scale", "updraft_scale", "wind_scale")},
+            height=int(d.get("height", -1)),
+            airspeed=int(d.get("airspeed", -1)),
+            speed_scale=float(d.get("speed_scale", 20.0)),
         )
 
 
@@ -264,10 +279,13 @@ class PrimitiveScoringPolicy(ActorCriticPolicy):
         self.scorer = dict(scorer)
         super().__init__(*args, **kwargs)
 
+    #: the extractor whose actor is the scorer (:class:`SuccessorPolicy` swaps it)
+    extractor_class: Any = None
+
     def _build_mlp_extractor(self) -> None:
         arch = self.net_arch
         vf = arch.get("vf", [64, 64]) if isinstance(arch, dict) else list(arch)
-        self.mlp_extractor = ScoringExtractor(self.features_dim, vf, self.scorer)
+        self.mlp_extractor = (self.extractor_class or ScoringExtractor)(self.features_dim, vf, self.scorer)
 
     def _build(self, lr_schedule: Any) -> None:
         super()._build(lr_schedule)
@@ -275,7 +293,7 @@ class PrimitiveScoringPolicy(ActorCriticPolicy):
         # action_net does (a near-uniform first policy)
         self.action_net = nn.Identity()
         scorer = self.mlp_extractor.policy_net
-        assert isinstance(scorer, PrimitiveScorer)
+        assert isinstance(scorer, (PrimitiveScorer, SuccessorScorer))
         last = scorer.head[-1]
         assert isinstance(last, nn.Linear)
         nn.init.orthogonal_(last.weight, gain=0.01)
@@ -287,3 +305,218 @@ class PrimitiveScoringPolicy(ActorCriticPolicy):
         data = super()._get_constructor_parameters()
         data["scorer"] = self.scorer
         return data
+
+
+# --- successor scoring: each primitive flown through the air the observation shows ------------------
+
+#: Entries of one primitive's successor features (:class:`SuccessorFeatures`): goal ahead/right,
+#: goal distance, height to the goal, height, wind ahead/right, edge cost, goal reached, ground hit,
+#: the primitive's airspeed, path angle and two turn rates, then per observed thermal (nearest to the
+#: successor first) present, ahead/right, distance, peak, radius.
+N_SUCCESSOR_BASE = 14
+N_SUCCESSOR_SLOT = 6
+
+
+class SuccessorFeatures:
+    """Body-frame observations (B, D) -> (B, 174, F) features of the state each primitive leads to.
+
+    The observation's thermal slots are rebuilt into an Allen field in the aircraft's frame (each at
+    its observed offset, w* chosen so that Allen's w_peak at the aircraft's height is the observed
+    peak; ``zi`` of the task's scenarios), with the observed wind; the 174 primitives are flown from
+    the aircraft (course 0 in that frame, the observed height and last airspeed) through the
+    model's ``rollout``. Where the observed slots hold every thermal near the aircraft (random goal
+    scenarios: 1-5 thermals, 3 slots) the edge costs are those the env will charge (README, round
+    nine: the probe's rebuilt field matched every flown edge). The features of a primitive are
+    its successor's goal offset, height, wind and thermal offsets in the successor's own frame, the
+    edge cost [kJ/kg], whether the edge reaches the goal region (``goal_radius``, fixed by the task
+    and not in the observation) or the ground, and the primitive's own settings. The domain's
+    bounds are not in the observation and play no part.
+
+    A cache (``cache_rows`` observations, least recently used out) keeps the features of rows seen
+    again: behaviour cloning and PPO's epochs score the same observations many times.
+    """
+
+    def __init__(
+        self,
+        layout: dict[str, Any],
+        aircraft: dict[str, Any],
+        duration: float,
+        n_points: int,
+        max_substep: float,
+        zi: float,
+        goal_radius: float,
+        cache_rows: int = 65_536,
+    ) -> None:
+        from collections import OrderedDict
+
+        from soaring_env.physics.aircraft import Aircraft
+        from soaring_env.primitives import PrimitiveLibrary
+
+        self.layout = ObservationLayout.from_dict(layout)
+        if self.layout.height < 0 or self.layout.airspeed < 0:
+            raise ConfigError("policy='successor' needs the observation's height and airspeed entries")
+        self.aircraft = Aircraft(**aircraft)
+        self.library = PrimitiveLibrary(duration=duration, n_points=n_points)
+        self.max_substep = float(max_substep)
+        self.zi = float(zi)
+        self.goal_radius = float(goal_radius)
+        self.cache_rows = int(cache_rows)
+        self._cache: OrderedDict[bytes, np.ndarray] = OrderedDict()
+        tab = self.library.table
+        full = math.radians(1080.0) / self.library.duration
+        rates = tab[:, [COL_CHI_DOT_1, COL_CHI_DOT_2]] / full
+        self._static = np.column_stack([tab[:, COL_AIRSPEED] / 20.0, tab[:, COL_GAMMA] * 5.0, rates])
+        self._unit = WindField(zi=self.zi)
+        self.n_features = N_SUCCESSOR_BASE + N_SUCCESSOR_SLOT * len(self.layout.thermals)
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        x = np.ascontiguousarray(obs, dtype=np.float32)
+        out = np.empty((x.shape[0], len(self.library), self.n_features), np.float32)
+        for i, row in enumerate(x):
+            key = row.tobytes()
+            f = self._cache.get(key)
+            if f is None:
+                f = self.one(row.astype(np.float64))
+                self._cache[key] = f
+                if len(self._cache) > self.cache_rows:
+                    self._cache.popitem(last=False)
+            else:
+                self._cache.move_to_end(key)
+            out[i] = f
+        return out
+
+    def field(self, obs: np.ndarray) -> WindField:
+        """The Allen field of the observed thermal slots, in the aircraft's frame (ahead = north)."""
+        from soaring_env.physics.thermals import Thermal
+
+        lay = self.layout
+        h = float(obs[lay.height]) * lay.height_scale
+        unit = self._unit.allen_profile(min(max(h, 1.0), self.zi * (1.0 - 1e-9)))["w_peak"]
+        ths = []
+        for present, ia, ir, ipk, _ in lay.thermals:
+            peak = float(obs[ipk]) * lay.updraft_scale
+            if obs[present] > 0.5 and peak > 0.0 and unit > 0.0:
+                ths.append(
+                    Thermal(
+                        north=float(obs[ia]) * lay.position_scale,
+                        east=float(obs[ir]) * lay.position_scale,
+                        strength=peak / unit,
+                    )
+                )
+        wa, wr = (float(obs[i]) * lay.wind_scale for i in lay.wind)
+        return WindField(thermals=tuple(ths), zi=self.zi, wind_north=wa, wind_east=wr)
+
+    def one(self, obs: np.ndarray) -> np.ndarray:
+        """(174, F) features of one body-frame observation (float64)."""
+        lay = self.layout
+        n = len(self.library)
+        h = float(obs[lay.height]) * lay.height_scale
+        vp = float(obs[lay.airspeed]) * lay.speed_scale
+        scale = np.array([lay.position_scale, lay.position_scale, lay.height_scale])
+        goal = np.array([obs[i] for i in lay.goal]) * scale
+        r = rollout(
+            np.tile(np.array([0.0, 0.0, 0.0, h]), (n, 1)),
+            self.field(obs),
+            self.aircraft,
+            primitive=np.arange(n),
+            library=self.library,
+            airspeed_prev=np.full(n, vp if vp > 0.0 else math.nan),  # 0: no previous edge
+            max_substep=self.max_substep,
+        )
+        s = r.states
+        d3 = np.sqrt((s[..., 0] - goal[0]) ** 2 + (s[..., 1] - goal[1]) ** 2 + (s[..., 3] - h - goal[2]) ** 2)
+        end = s[:, -1, :]
+        c, sn = np.cos(end[:, 2]), np.sin(end[:, 2])
+
+        def frame(dn: np.ndarray, de: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            # an offset (north, east) of the aircraft's frame into the successor's (ahead, right)
+            return dn * c + de * sn, -dn * sn + de * c
+
+        ga, gr = frame(goal[0] - end[:, 0], goal[1] - end[:, 1])
+        wind = [float(obs[i]) * lay.wind_scale for i in lay.wind]
+        wa, wr = frame(np.full(n, wind[0]), np.full(n, wind[1]))
+        km = 1000.0
+        base = [
+            ga / km, gr / km, np.hypot(ga, gr) / km, (h + goal[2] - end[:, 3]) / km, end[:, 3] / km, wa / 10.0,
+            wr / 10.0, r.cost / km, (d3 <= self.goal_radius).any(axis=1), (s[..., 3] <= 0.0).any(axis=1),
+        ]  # fmt: skip
+        slots = []
+        for present, ia, ir, ipk, irad in lay.thermals:
+            on = float(obs[present] > 0.5)
+            ta, tr = frame(obs[ia] * lay.position_scale - end[:, 0], obs[ir] * lay.position_scale - end[:, 1])
+            dist = np.hypot(ta, tr)
+            peak = obs[ipk] * lay.updraft_scale / 5.0 * on
+            radius = obs[irad] * lay.position_scale / km * on
+            far = np.where(on > 0, dist, 1e4) / km
+            slots.append(
+                np.column_stack([np.full(n, on), ta / km * on, tr / km * on, far, np.full(n, peak), np.full(n, radius)])
+            )
+        f = np.column_stack([*base, self._static])
+        if slots:
+            st = np.stack(slots, axis=1)  # (174, K, 6): nearest to the successor first, empty slots last
+            order = np.argsort(st[:, :, 3], axis=1, kind="stable")
+            st = np.take_along_axis(st, order[..., None], axis=1)
+            st[:, :, 3] = np.minimum(st[:, :, 3], 10.0) * st[:, :, 0]
+            f = np.column_stack([f, st.reshape(n, -1)])
+        return f.astype(np.float32)
+
+
+def successor_kwargs(env: Any) -> dict[str, Any]:
+    """The constructor arguments of :class:`SuccessorScorer` for ``env`` (a raw single env of the
+    goal-reaching primitive task): observation layout, aircraft, primitives, integration, the
+    scenario family's ``zi`` and goal radius."""
+    u = env.unwrapped if hasattr(env, "unwrapped") else env
+    sc = u.scenario
+    lib = u.library
+    return {
+        "layout": ObservationLayout.of(u.observation_names, u.config).to_dict(),
+        "aircraft": dataclasses.asdict(u.model.aircraft),
+        "duration": float(lib.duration),
+        "n_points": int(lib.n_points),
+        "max_substep": float(u.model.max_substep),
+        "zi": float(sc.field.zi),
+        "goal_radius": float(sc.require_goal().radius),
+    }
+
+
+class SuccessorScorer(nn.Module):
+    """Body-frame observations (B, D) -> logits (B, 174): one MLP over each primitive's successor
+    features (:class:`SuccessorFeatures`), shared by all primitives.
+
+    A policy over what each primitive *leads to* rather than over the observation: the cloning
+    loss then compares the demonstrated successor with the 173 others the same observation
+    offers, so states the plans never visit are scored too (README, round nine).
+    """
+
+    def __init__(self, obs_dim: int, hidden: Sequence[int] = (128, 128), **features: Any) -> None:
+        super().__init__()
+        self.features = SuccessorFeatures(**features)
+        sizes = [self.features.n_features, *(int(h) for h in hidden)]
+        layers: list[Any] = []
+        for a, b in itertools.pairwise(sizes):
+            layers += [nn.Linear(a, b), nn.Tanh()]
+        layers.append(nn.Linear(sizes[-1], 1))
+        self.head = nn.Sequential(*layers)
+
+    def forward(self, obs: Any) -> Any:
+        f = torch.as_tensor(self.features(obs.detach().cpu().numpy()), dtype=obs.dtype)
+        return self.head(f).squeeze(-1)
+
+
+class SuccessorExtractor(MlpExtractor):
+    """SB3's extractor with the actor replaced by :class:`SuccessorScorer` (latent = logits)."""
+
+    def __init__(self, feature_dim: int, vf_arch: Sequence[int], scorer: dict[str, Any]) -> None:
+        super().__init__(feature_dim, net_arch={"pi": [], "vf": list(vf_arch)}, activation_fn=nn.Tanh)
+        net = SuccessorScorer(feature_dim, **scorer)
+        self.policy_net = net  # type: ignore[assignment]
+        self.latent_dim_pi = len(net.features.library)
+
+
+class SuccessorPolicy(PrimitiveScoringPolicy):
+    """ActorCriticPolicy over ``Discrete(174)`` whose logits come from :class:`SuccessorScorer`.
+
+    :param scorer: :func:`successor_kwargs` of the env (plus optionally ``hidden``).
+    """
+
+    extractor_class = SuccessorExtractor

@@ -226,6 +226,7 @@ def _tiny_run(algo: str, ref_dir: Path, **kwargs: object) -> TrainConfig:
     [
         ("discrete", {}),
         ("discrete", {"policy": "scoring", "scorer_hidden": (8,)}),
+        ("discrete", {"policy": "successor", "scorer_hidden": (8,)}),
         ("masked", {}),
         ("grid", {"final_glide": True}),
     ],

@@ -112,16 +112,26 @@ def test_scoring_policy_saves_loads_and_predicts_alike(env: gym.Env, tmp_path: P
         device="cpu",
         policy_kwargs={"net_arch": {"pi": [], "vf": [32]}, "scorer": {**scorer_kwargs(env), "hidden": [16]}},
     )
+    probs = _check_saves_and_loads(model, env, tmp_path)
+    assert probs.max() < 2.0 / 174  # the small last layer: a near-uniform first policy
+
+
+def _check_saves_and_loads(model: object, env: gym.Env, tmp_path: Path) -> np.ndarray:
+    """A distribution over the 174 primitives, and a saved and loaded copy that acts alike; returns
+    the probabilities at one observation."""
+    import torch
+    from stable_baselines3 import PPO
+
     obs, _ = env.reset(seed=1)
     with torch.no_grad():
-        probs = model.policy.get_distribution(torch.as_tensor(obs[None])).distribution.probs.numpy()[0]
+        probs = model.policy.get_distribution(torch.as_tensor(obs[None])).distribution.probs.numpy()[0]  # type: ignore[attr-defined]
     assert probs.shape == (174,) and np.isclose(probs.sum(), 1.0, atol=1e-5)
-    assert probs.max() < 2.0 / 174  # the small last layer: a near-uniform first policy
-    model.save(tmp_path / "m.zip")
+    model.save(tmp_path / "m.zip")  # type: ignore[attr-defined]
     loaded = PPO.load(tmp_path / "m.zip", device="cpu")
     for seed in range(3):
         o, _ = env.reset(seed=seed)
-        assert model.predict(o, deterministic=True)[0] == loaded.predict(o, deterministic=True)[0]
+        assert model.predict(o, deterministic=True)[0] == loaded.predict(o, deterministic=True)[0]  # type: ignore[attr-defined]
+    return probs
 
 
 def test_bad_scoring_settings_are_refused() -> None:
@@ -131,8 +141,9 @@ def test_bad_scoring_settings_are_refused() -> None:
         {"algo": "discrete", "task": "climb"},
         {"algo": "discrete", "body_frame": False},
     ):
-        with pytest.raises(ValueError, match="policy='scoring'"):
-            TrainConfig(policy="scoring", **kwargs)  # type: ignore[arg-type]
+        for policy in ("scoring", "successor"):
+            with pytest.raises(ValueError, match=f"policy='{policy}'"):
+                TrainConfig(policy=policy, **kwargs)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="policy="):
         TrainConfig(algo="discrete", policy="transformer")
     for bad in ((), "64", (0,), (16.5,), (True,)):
@@ -146,3 +157,89 @@ def test_scoring_needs_the_observed_thermals() -> None:
 
     with pytest.raises(ConfigError, match="thermal_0_present"):
         scorer_kwargs(gym.make(DISCRETE_ID, observe_thermals=False))
+
+
+# --- the successor-scoring policy -------------------------------------------------------------------
+
+
+def _successor(env: gym.Env) -> object:
+    from baselines.scoring import SuccessorFeatures, successor_kwargs
+
+    return SuccessorFeatures(**successor_kwargs(env))
+
+
+@pytest.mark.parametrize("scenario", ["paper", "random"])
+def test_successor_features_predict_every_flown_edge(scenario: str) -> None:
+    """Where the observed slots hold every thermal (the paper's one; random draws of at most three),
+    the field rebuilt from the observation gives each flown edge the cost the env charges, and the
+    goal flag of the flown primitive says whether the step ends in the goal."""
+    env = BodyFrameObservation(gym.make(DISCRETE_ID, scenario=scenario))
+    feats = _successor(env)
+    rng = np.random.default_rng(1)
+    checked = goals = 0
+    for seed in range(12):
+        obs, _ = env.reset(seed=seed)
+        if len(env.unwrapped.scenario.field.thermals) > 3:
+            continue
+        for _ in range(40):
+            f = feats(obs[None])[0]  # type: ignore[operator]
+            # towards the goal mostly (so that some episodes end there), else any primitive
+            a = int(np.argmin(f[:, 2])) if rng.random() < 0.7 else int(rng.integers(174))
+            obs, _, term, trunc, info = env.step(a)
+            assert abs(f[a, 7] * 1000.0 - info["edge_cost"]) < 0.05  # [J/kg]; float32 features
+            assert bool(f[a, 8]) == (info["outcome"] == "goal")
+            checked += 1
+            goals += info["outcome"] == "goal"
+            if term or trunc:
+                break
+    assert checked > 20 and goals > 0
+
+
+def test_successor_features_of_the_mirror_image_are_mirrored() -> None:
+    """The mirror world with the mirrored primitive: the same successor up to the sign of every
+    'right' component and of the turn rates."""
+    from baselines.ppo import policy_frame
+
+    env = BodyFrameObservation(gym.make(DISCRETE_ID, scenario="random"))
+    u = env.unwrapped
+    signs = policy_frame(u).mirror_signs(u.observation_names)
+    mirror = u.library.mirror_indices()
+    feats = _successor(env)
+    for seed in range(3):
+        obs, _ = env.reset(seed=seed)
+        f, fm = feats(obs[None])[0], feats((obs * signs)[None])[0]  # type: ignore[operator]
+        flip = np.where(np.isclose(f[mirror], fm, atol=1e-4), 1.0, -1.0).min(axis=0)
+        assert np.allclose(f[mirror] * flip, fm, atol=1e-4)
+        assert flip[1] < 0 and flip[0] > 0 and flip[7] > 0  # goal right flips; ahead and cost do not
+
+
+def test_successor_policy_saves_loads_and_predicts_alike(tmp_path: Path) -> None:
+    import torch
+    from stable_baselines3 import PPO
+
+    from baselines.scoring import SuccessorPolicy, successor_kwargs
+
+    env = BodyFrameObservation(gym.make(DISCRETE_ID))
+    torch.manual_seed(0)
+    model = PPO(
+        SuccessorPolicy,
+        env,
+        seed=0,
+        device="cpu",
+        n_steps=32,
+        batch_size=16,
+        n_epochs=1,
+        policy_kwargs={"net_arch": {"pi": [], "vf": [32]}, "scorer": {**successor_kwargs(env), "hidden": [16]}},
+    )
+    model.learn(32)  # PPO trains it (the features are fixed functions of the observation)
+    _check_saves_and_loads(model, env, tmp_path)
+
+
+def test_successor_needs_height_and_airspeed_entries() -> None:
+    from baselines.scoring import SuccessorFeatures, successor_kwargs
+    from soaring_env._validation import ConfigError
+
+    kw = successor_kwargs(gym.make(DISCRETE_ID))
+    layout = {k: v for k, v in kw["layout"].items() if k not in ("height", "airspeed")}  # a layout saved earlier
+    with pytest.raises(ConfigError, match="height and airspeed"):
+        SuccessorFeatures(**{**kw, "layout": layout})
