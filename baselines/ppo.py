@@ -1299,21 +1299,16 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
         policy_cls: Any = "MlpPolicy"
         if config.algo == "continuous":
             policy_kwargs["log_std_init"] = config.log_std_init
-        if config.policy == "scoring":
-            from baselines.scoring import PrimitiveScoringPolicy, scorer_kwargs
+        if config.policy != "mlp":
+            from baselines.scoring import PrimitiveScoringPolicy, SuccessorPolicy, scorer_kwargs, successor_kwargs
 
-            policy_cls = PrimitiveScoringPolicy
+            policy_cls, make_scorer = {
+                "scoring": (PrimitiveScoringPolicy, scorer_kwargs),
+                "successor": (SuccessorPolicy, successor_kwargs),
+            }[config.policy]
             policy_kwargs = {
                 "net_arch": {"pi": [], "vf": list(config.net_arch)},
-                "scorer": {**scorer_kwargs(_probe(config)), "hidden": list(config.scorer_hidden)},
-            }
-        elif config.policy == "successor":
-            from baselines.scoring import SuccessorPolicy, successor_kwargs
-
-            policy_cls = SuccessorPolicy
-            policy_kwargs = {
-                "net_arch": {"pi": [], "vf": list(config.net_arch)},
-                "scorer": {**successor_kwargs(_probe(config)), "hidden": list(config.scorer_hidden)},
+                "scorer": {**make_scorer(_probe(config)), "hidden": list(config.scorer_hidden)},
             }
         model = algo_cls(
             policy_cls,
