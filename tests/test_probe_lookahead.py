@@ -40,7 +40,16 @@ def test_straight_glide_estimate_closed_form() -> None:
     assert np.isclose(est, probe.G * 100.0 / 0.8)
 
 
-@pytest.mark.parametrize("args", [["--width", "0"], ["--depth", "0"], ["--glide-ratio", "-1"], ["--top", "0"]])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["--width", "0"],
+        ["--depth", "0"],
+        ["--glide-ratio", "-1"],
+        ["--top", "0"],
+        ["--mode", "rerank", "--policy", "nowhere.zip"],
+    ],
+)
 def test_bad_options_are_refused(args: list[str]) -> None:
     with pytest.raises(SystemExit) as exc:
         _probe().main(args)

@@ -313,6 +313,10 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     if args.width < 1 or args.depth < 1 or not args.glide_ratio > 0 or min(args.top) < 1:
         p.error("--width, --depth and --top must be >= 1 and --glide-ratio > 0")
+    if args.mode == "rerank" and not (
+        Path(args.policy).is_file() and (Path(args.policy).parent / "config.json").is_file()
+    ):
+        p.error(f"--policy {args.policy}: no such model.zip beside a config.json (a train_ppo.py run's output)")
 
     import gymnasium as gym
     import torch
