@@ -371,6 +371,8 @@ class SuccessorFeatures:
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         x = np.ascontiguousarray(obs, dtype=np.float32)
+        if x.ndim != 2 or not np.all(np.isfinite(x)):
+            raise ConfigError(f"observations of shape {x.shape} must be a finite (B, D) array of body-frame rows")
         out = np.empty((x.shape[0], len(self.library), self.n_features), np.float32)
         for i, row in enumerate(x):
             key = row.tobytes()

@@ -243,3 +243,17 @@ def test_successor_needs_height_and_airspeed_entries() -> None:
     layout = {k: v for k, v in kw["layout"].items() if k not in ("height", "airspeed")}  # a layout saved earlier
     with pytest.raises(ConfigError, match="height and airspeed"):
         SuccessorFeatures(**{**kw, "layout": layout})
+
+
+def test_successor_features_refuse_non_finite_observations() -> None:
+    from soaring_env._validation import ConfigError
+
+    env = BodyFrameObservation(gym.make(DISCRETE_ID))
+    obs, _ = env.reset(seed=0)
+    feats = _successor(env)
+    bad = obs.copy()
+    bad[0] = np.nan
+    with pytest.raises(ConfigError, match="finite"):
+        feats(bad[None])  # type: ignore[operator]
+    with pytest.raises(ConfigError, match="finite"):
+        feats(obs)  # type: ignore[operator]  (one row, not a batch)
