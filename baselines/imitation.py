@@ -34,6 +34,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from baselines._runs import progress_bar
 from baselines.reference import ReferenceConfig, ScenarioReference, load_references
 from baselines.reference.tasks import goal_config
 from soaring_env._validation import ConfigError, check_int, check_positive
@@ -436,10 +437,12 @@ def pretrain(
     *,
     epochs: int,
     learning_rate: float = 1e-3,
+    final_fraction: float = 1.0,
     batch_size: int = 256,
     value_weight: float = 0.5,
     seed: int = 0,
     optimizer: Any = None,
+    progress: bool = False,
 ) -> list[dict[str, float]]:
     """Fit an SB3 ``ActorCriticPolicy`` to ``demos``: the actor by the negative log-likelihood of the
     demonstrated actions, the critic by least squares on the returns-to-go, each row weighted by
@@ -451,11 +454,14 @@ def pretrain(
 
     :param policy: ``model.policy`` of a PPO / MaskablePPO model on the demonstrations' spaces.
     :param epochs: passes over the demonstrations.
-    :param learning_rate: Adam step size.
+    :param learning_rate: Adam step size (of a fresh optimizer: at the first minibatch).
+    :param final_fraction: with a fresh optimizer, the step size falls linearly per minibatch to
+        this fraction of ``learning_rate`` at the last one (1: constant; ignored with ``optimizer``).
     :param batch_size: rows per minibatch.
     :param value_weight: weight of the critic's loss beside the actor's.
     :param seed: minibatch order.
     :param optimizer: a torch optimizer over the policy's parameters (None: a fresh Adam).
+    :param progress: show a progress bar over the epochs (with the last epoch's loss).
     :returns: per epoch the mean actor loss (``nll``), critic loss (``value_mse``) and, for
         Gaussian policies, the mean absolute error of the mean action (``mae``).
     """
@@ -463,6 +469,8 @@ def pretrain(
 
     if epochs < 1 or batch_size < 1:
         raise ConfigError(f"pretrain: epochs={epochs!r} and batch_size={batch_size!r} must be >= 1")
+    if not 0.0 <= final_fraction <= 1.0:
+        raise ConfigError(f"pretrain: final_fraction={final_fraction!r} must be in [0, 1]")
     obs = torch.as_tensor(demos.observations)
     act = torch.as_tensor(demos.actions)
     ret = torch.as_tensor(demos.returns)
@@ -470,12 +478,20 @@ def pretrain(
     opt = optimizer if optimizer is not None else torch.optim.Adam(policy.parameters(), lr=learning_rate)
     gen = np.random.default_rng(seed)
     n = len(demos)
+    per_epoch = -(-n // batch_size)
+    total = int(epochs) * per_epoch
+    decay = optimizer is None and final_fraction != 1.0
     log: list[dict[str, float]] = []
+    bar = progress_bar(int(epochs), 0, progress, "behaviour cloning", "epoch")
     policy.set_training_mode(True)
-    for _ in range(int(epochs)):
+    for e in range(int(epochs)):
         order = gen.permutation(n)
         sums = {"nll": 0.0, "value_mse": 0.0, "mae": 0.0}
-        for start in range(0, n, batch_size):
+        for b, start in enumerate(range(0, n, batch_size)):
+            if decay:  # linear from learning_rate at the first minibatch to the final fraction at the last
+                frac = (e * per_epoch + b) / max(total - 1, 1)
+                for g in opt.param_groups:
+                    g["lr"] = learning_rate * (1.0 - (1.0 - final_fraction) * frac)
             idx = torch.as_tensor(order[start : start + batch_size])
             values, log_prob, _ = policy.evaluate_actions(obs[idx], act[idx])
             sq = (values.flatten() - ret[idx]) ** 2
@@ -496,6 +512,11 @@ def pretrain(
                     mean = policy.get_distribution(obs[idx]).distribution.mean
                     sums["mae"] += float(torch.mean(torch.abs(mean - act[idx]))) * w
         log.append({k: v / n for k, v in sums.items() if k != "mae" or act.dtype.is_floating_point})
+        if bar is not None:
+            bar.set_postfix(nll=f"{log[-1]['nll']:.3f}")
+            bar.update(1)
+    if bar is not None:
+        bar.close()
     policy.set_training_mode(False)
     return log
 

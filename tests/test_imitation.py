@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -201,6 +203,50 @@ def test_weighted_cloning_fits_the_weighted_mean_of_conflicting_labels() -> None
             p = dist.probs.numpy()[0]
             assert abs(p[3] - 0.75) < 0.02 and abs(p[40] - 0.25) < 0.02
         env.close()
+
+
+def test_cloning_step_size_falls_linearly_and_bad_settings_are_refused(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Closed form: 3 epochs of 2 minibatches step at lr * (1 - (1 - f) * k / 5), k = 0 ... 5; a
+    constant step size by default; a fraction outside [0, 1] is refused."""
+    import torch
+    from stable_baselines3 import PPO
+
+    from baselines.imitation import Demonstrations
+
+    steps: list[float] = []
+
+    class Recording(torch.optim.Adam):
+        def step(self, closure: Any = None) -> Any:
+            steps.append(float(self.param_groups[0]["lr"]))
+            return super().step(closure)
+
+    env = _env(DISCRETE_ID)(SCENARIOS[0])
+    obs, _ = env.reset(seed=0)
+    demos = Demonstrations(
+        observations=np.stack([obs] * 4).astype(np.float32),
+        actions=np.array([3, 40, 3, 7], np.int64),
+        returns=np.zeros(4, np.float32),
+        episode=np.array([0, 1, 2, 3]),
+        scenarios=("a", "b", "c", "d"),
+        plan_costs=(0.0,) * 4,
+        weights=np.ones(4, np.float32),
+    )
+    model = PPO("MlpPolicy", env, seed=0, device="cpu", policy_kwargs={"net_arch": [8]})
+    monkeypatch.setattr(torch.optim, "Adam", Recording)
+    pretrain(model.policy, demos, epochs=3, learning_rate=1e-2, final_fraction=0.1, batch_size=2, seed=0)
+    assert np.allclose(steps, [1e-2 * (1.0 - 0.9 * k / 5) for k in range(6)], rtol=1e-12)
+    steps.clear()
+    pretrain(model.policy, demos, epochs=3, learning_rate=1e-2, batch_size=2, seed=0)
+    assert steps == [1e-2] * 6
+    with pytest.raises(ConfigError, match=r"final_fraction=1\.5"):
+        pretrain(model.policy, demos, epochs=1, final_fraction=1.5)
+    for bad in (-0.1, 2.0, "0.5", True):
+        with pytest.raises(ValueError, match="demo_lr_final_fraction"):
+            TrainConfig(demo_lr_final_fraction=bad)  # type: ignore[arg-type]
+    for bad in (0, -3, 2.5, "64", True):
+        with pytest.raises(ValueError, match="demo_batch_size"):
+            TrainConfig(demo_batch_size=bad)  # type: ignore[arg-type]
+    env.close()
 
 
 def _tiny_run(algo: str, ref_dir: Path, **kwargs: object) -> TrainConfig:
@@ -827,3 +873,42 @@ def test_demos_cli_env_kwargs(ref_dir: Path, tmp_path: Path, capsys: pytest.Capt
     with pytest.raises(SystemExit) as exc:
         main([*common, "--env-kwargs", json.dumps(TS10), "--dagger", str(run), "--out", str(tmp_path / "d")])
     assert exc.value.code == 2 and "flew with" in capsys.readouterr().err
+
+
+def test_diagnose_clone_fit_and_ensemble(
+    ref_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``scripts/diagnose_clone.py``: a policy cloned by heart fits its plans (top-1 = 1 - the two
+    error shares); the same run twice side by side flies as the run alone does; bad runs refused."""
+    from baselines.agents import PPOAgent
+    from baselines.cli import diagnose_clone as dc
+    from baselines.evaluation import make_env, run_episode
+
+    run = _tiny_run(
+        "discrete", ref_dir, demo_epochs=200, demo_learning_rate=1e-2, demo_mirror=False, policy="successor",
+        scorer_hidden=(128, 128),
+    )  # fmt: skip
+    out = train(dataclasses.replace(run, total_timesteps=0), tmp_path / "succ")  # the clone alone
+    fit = dc.fit_report(out, ref_dir, None)
+    a = fit["all"]
+    assert fit["plans"] == len(SCENARIOS) and fit["visited"]["rows"] == 0  # no DAgger plan among them
+    assert a["top1"] >= 0.9 and math.isclose(a["top1"] + a["near_equivalent"] + a["different"], 1.0)
+    files = []
+    for sc in SCENARIOS:  # scenarios by file (a set names them; these have no registered name)
+        sc.save(tmp_path / f"{sc.name}.json")
+        files.append(str(tmp_path / f"{sc.name}.json"))
+    monkeypatch.setitem(dc.SETS, "tiny", (files, str(ref_dir)))
+    ens = dc.ensemble_report([str(out), str(out)], "tiny")
+    agent, env = PPOAgent(out), make_env(DISCRETE_ID)
+    for row, sc in zip(ens["episodes"], SCENARIOS, strict=True):
+        assert row["energy_spent"] == run_episode(env, agent, sc, 0, keep_path=False)["energy_spent"]
+    assert dc.regret_summary(ens["episodes"])["episodes"] == len(SCENARIOS)
+    for argv, msg in (
+        (["ensemble"], "needs --runs"),
+        (["ensemble", "--runs", str(tmp_path)], "no model.zip"),
+        (["demonstrator", "--on", "val"], "needs --out"),
+        (["demonstrator", "--out", str(tmp_path / "d"), "--time-weight", "-1"], "time-weight"),
+    ):
+        with pytest.raises(SystemExit):
+            dc.main(argv)
+        assert msg in capsys.readouterr().err

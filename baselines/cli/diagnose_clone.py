@@ -1,0 +1,299 @@
+"""Diagnose a cloned primitive policy (README, round ten): where does its regret come from?
+
+Three measurements for the successor policies of ``scripts/train_ppo.py --algo discrete --set
+'policy="successor"'``, each written as JSON (``--out``) and printed as a table:
+
+* ``fit``: how well the policy fits demonstrations (``--demos`` folder, ``--match`` regular
+  expression over scenario names): mean negative log-likelihood of the demonstrated primitive, the
+  share of rows whose most likely primitive is the demonstrated one, and the share of the other
+  rows whose successor is *near-equivalent* to the demonstrated one (goal distance within
+  ``NEAR_GOAL_M``, height within ``NEAR_HEIGHT_M``, edge cost within ``NEAR_COST`` -- e.g. a 360
+  against a 720 degree circle) or *different* (everything else); separately for the rows a
+  DAgger round labelled (a visited state: the first row of a ``-<tag>s<k>`` plan).
+* ``demonstrator``: the regret of the demonstrator itself (the goal env's own search with the time
+  weight and beam width of ``scripts/demos.py``) on scenarios outside its training set, its plans
+  replayed through ``env.step`` and scored against ``--reference-dir``.
+* ``ensemble``: the regret of the runs' policies side by side, the mean of their logits deciding
+  (one run: the policy itself, as ``scripts/evaluate.py`` flies it).
+
+Scenario sets (``--on``): ``val`` = ``random-5000 ... 5019`` against ``results/reference-val``
+(narrow primitive references, made for this round), ``h21`` = ``paper`` + ``random-10000 ...
+10019`` against the yardstick (``results/reference``), ``h100`` = ``paper`` + ``random-10000 ...
+10099`` against ``results/reference-heldout100``.
+
+Usage::
+
+    python scripts/diagnose_clone.py fit --runs results/ppo-score/s3 --match 'random-201[2-7]\\d-s3s\\d+'
+    python scripts/diagnose_clone.py demonstrator --on val --out results/ppo-score/round10/demonstrator
+    python scripts/diagnose_clone.py ensemble --runs results/ppo-score/s2 results/ppo-score/s3 --on h100
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from baselines._runs import check_cli_args
+from soaring_env._validation import ConfigError
+from soaring_env.scenario import atomic_write_text
+
+#: Near-equivalent successors (``fit``): goal distance within this [m], height within this [m] and
+#: edge cost within this [J/kg] of the demonstrated successor's.
+NEAR_GOAL_M = 50.0
+NEAR_HEIGHT_M = 10.0
+NEAR_COST = 20.0
+
+#: The scenario sets of ``--on``: (names, reference folder).
+SETS: dict[str, tuple[list[str], str]] = {
+    "val": ([f"random-{5000 + i}" for i in range(20)], "results/reference-val"),
+    "h21": (["paper"] + [f"random-{10000 + i}" for i in range(20)], "results/reference"),
+    "h100": (["paper"] + [f"random-{10000 + i}" for i in range(100)], "results/reference-heldout100"),
+}
+
+# feature columns of baselines.scoring.SuccessorFeatures (N_SUCCESSOR_BASE entries first)
+_GOAL_DIST, _HEIGHT, _COST = 2, 4, 7
+
+
+def _run_dir(run: str | Path) -> Path:
+    """``RUN`` or ``RUN/discrete``: the folder holding ``model.zip`` and ``config.json``."""
+    d = Path(run)
+    if not (d / "model.zip").is_file() and (d / "discrete" / "model.zip").is_file():
+        d = d / "discrete"
+    if not (d / "model.zip").is_file() or not (d / "config.json").is_file():
+        raise ConfigError(f"run={str(run)!r}: no model.zip beside a config.json (a scripts/train_ppo.py run)")
+    cfg = json.loads((d / "config.json").read_text())
+    if cfg.get("algo") != "discrete" or cfg.get("config", {}).get("policy") != "successor":
+        raise ConfigError(f"run={str(run)!r} is not a successor policy (--algo discrete, policy='successor')")
+    return d
+
+
+def _logits(policy: Any, obs: np.ndarray) -> np.ndarray:
+    """The policy's logits (B, 174) for body-frame observations, in blocks."""
+    import torch
+
+    with torch.no_grad():
+        out = [
+            policy.get_distribution(torch.as_tensor(obs[i : i + 512])).distribution.logits.numpy()
+            for i in range(0, len(obs), 512)
+        ]
+    return np.concatenate(out)
+
+
+def fit_report(run: str | Path, demos_dir: str | Path, match: str | None) -> dict[str, Any]:
+    """The ``fit`` measurement of one run on the demonstrations that ``match`` selects."""
+    from baselines.imitation import demonstrations
+    from baselines.ppo import load_model, make_eval_env
+
+    d = _run_dir(run)
+    c = json.loads((d / "config.json").read_text())["config"]
+    model = load_model(d / "model.zip", "discrete")
+    plans = demonstrations(
+        str(demos_dir),
+        lambda sc: make_eval_env(
+            c["env_id"], [sc], c["env_kwargs"], True, c["turn_exponent"], False, bool(c["final_glide"])
+        ),
+        sampler="primitive",
+        gamma=float(c["gamma"]),
+        match=match,
+    )
+    obs, act = plans.observations, plans.actions.astype(np.int64)
+    lg = _logits(model.policy, obs)
+    lp = lg - lg.max(axis=1, keepdims=True)
+    lp = lp - np.log(np.exp(lp).sum(axis=1, keepdims=True))
+    i = np.arange(len(act))
+    best = lg.argmax(axis=1)
+    feats = model.policy.mlp_extractor.policy_net.features(obs)
+    fa, fb = feats[i, act], feats[i, best]
+    near = (
+        (np.abs(fa[:, _GOAL_DIST] - fb[:, _GOAL_DIST]) * 1000.0 <= NEAR_GOAL_M)
+        & (np.abs(fa[:, _HEIGHT] - fb[:, _HEIGHT]) * 1000.0 <= NEAR_HEIGHT_M)
+        & (np.abs(fa[:, _COST] - fb[:, _COST]) * 1000.0 <= NEAR_COST)
+    )
+    right = best == act
+    visited = np.zeros(len(act), bool)
+    starts = np.r_[True, plans.episode[1:] != plans.episode[:-1]]
+    dagger = np.array([re.search(r"-[A-Za-z0-9]*s\d+$", s) is not None for s in plans.scenarios])  # <name>-<tag>s<k>
+    visited[starts] = dagger[plans.episode[starts]]
+
+    def shares(m: np.ndarray) -> dict[str, float]:
+        n = max(int(m.sum()), 1)
+        return {
+            "rows": int(m.sum()),
+            "nll": float(-lp[i[m], act[m]].mean()) if m.any() else float("nan"),
+            "top1": float(right[m].sum() / n),
+            "near_equivalent": float((~right & near)[m].sum() / n),
+            "different": float((~right & ~near)[m].sum() / n),
+        }
+
+    return {
+        "run": str(d),
+        "match": match,
+        "plans": len(plans.scenarios),
+        "all": shares(np.ones(len(act), bool)),
+        "visited": shares(visited),
+    }
+
+
+def demonstrator_report(
+    on: str, out: Path, beam_width: int, time_weight: float, workers: int, progress: bool
+) -> dict[str, Any]:
+    """The ``demonstrator`` measurement: plans of the demos' search on ``on``'s scenarios (kept in
+    ``out/plans``; a rerun resumes), replayed through ``env.step`` and scored."""
+    import gymnasium as gym
+
+    import soaring_env  # noqa: F401  (registers the ids)
+    from baselines.reference import ReferenceConfig, load_references
+    from baselines.reference.runner import run_references
+    from baselines.reference.tasks import reference_config
+    from soaring_env.scenario import get_scenario
+
+    names, ref_dir = SETS[on]
+    env = gym.make("soaring/Soaring-v0")
+    cfg = reference_config(env, beam_width, time_weight, 0.0)
+    assert isinstance(cfg, ReferenceConfig)  # the goal task's search (not the climb's horizon search)
+    run_references(
+        [get_scenario(n) for n in names],
+        out / "plans",
+        samplers=("primitive",),
+        config=cfg,
+        workers=workers,
+        progress=progress,
+        env_id="soaring/Soaring-v0",
+        prefixes={},
+        env_kwargs=None,
+    )
+    plans, refs = load_references(out / "plans"), load_references(ref_dir)
+    rows = []
+    for n in names:
+        _, info = env.reset(seed=0, options={"scenario": get_scenario(n)})
+        for a in plans[n].samplers["primitive"].actions:
+            _, _, term, trunc, info = env.step(int(a))
+            if term or trunc:
+                break
+        e = float(info["energy_spent"])
+        r = refs[n].regret(e, "primitive") if n in refs and info.get("is_success") else float("nan")
+        rows.append({"scenario": n, "success": bool(info.get("is_success")), "energy_spent": e, "regret": r})
+    env.close()
+    return {"on": on, "beam_width": beam_width, "time_weight": time_weight, "episodes": rows}
+
+
+def ensemble_report(runs: list[str], on: str) -> dict[str, Any]:
+    """The ``ensemble`` measurement: one deterministic episode per scenario of ``on``."""
+    import torch
+
+    from baselines.agents import PPOAgent
+    from baselines.evaluation import episode_regret, make_env, ppo_env_kwargs, resolve_scenario, run_episode
+    from baselines.reference import load_references
+
+    names, ref_dir = SETS[on]
+    refs = load_references(ref_dir)
+    agents = [PPOAgent(_run_dir(r) / "model.zip") for r in runs]
+    env = make_env(agents[0].env_id, ppo_env_kwargs(agents[0].config))
+
+    class MeanOfLogits:
+        """The runs side by side: the primitive with the largest mean logit."""
+
+        def reset(self, env: Any, seed: int | None = None) -> None:
+            for a in agents:
+                a.reset(env, seed)
+
+        def predict(self, observation: Any, deterministic: bool = True) -> tuple[Any, None]:
+            logits = []
+            for a in agents:
+                o = a._obs_fn(observation) if a._obs_fn is not None else observation
+                t, _ = a.model.policy.obs_to_tensor(o)
+                with torch.no_grad():
+                    logits.append(a.model.policy.get_distribution(t).distribution.logits[0].numpy())
+            return np.int64(int(np.argmax(np.mean(logits, axis=0)))), None
+
+    agent = MeanOfLogits()
+    rows = []
+    for n in names:
+        ep = run_episode(env, agent, resolve_scenario(n, {}), 0, keep_path=False)
+        ep.update(scenario=n, env_id=agents[0].env_id)
+        r = episode_regret(ep, refs)
+        rows.append({"scenario": n, "success": ep["success"], "energy_spent": ep["energy_spent"], "regret": r})
+    env.close()
+    return {"on": on, "runs": [str(_run_dir(r)) for r in runs], "episodes": rows}
+
+
+def regret_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """Median and mean regret over the successful episodes with a regret, the count <= 0.6, failures."""
+    r = np.array([x["regret"] for x in rows if x["success"] and x["regret"] is not None], float)
+    r = r[~np.isnan(r)]
+    return {
+        "episodes": len(rows),
+        "with_regret": len(r),
+        "median": float(np.median(r)) if len(r) else float("nan"),
+        "mean": float(np.mean(r)) if len(r) else float("nan"),
+        "at_most_0.6": int((r <= 0.6).sum()),
+        "failures": sum(not x["success"] for x in rows),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point; returns the exit status."""
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("mode", choices=("fit", "demonstrator", "ensemble"))
+    p.add_argument("--runs", nargs="+", default=[], help="successor-policy runs (fit: each; ensemble: together)")
+    p.add_argument("--demos", default="results/reference-train-prim-t1", help="fit: the demonstrations' folder")
+    p.add_argument("--match", default=None, help="fit: only the scenario names matching this regular expression")
+    p.add_argument("--on", choices=sorted(SETS), default="val", help="demonstrator / ensemble: scenario set")
+    p.add_argument("--beam-width", type=int, default=250, help="demonstrator: the search's beam width")
+    p.add_argument("--time-weight", type=float, default=1.0, help="demonstrator: its time weight [J/kg per s]")
+    p.add_argument("--workers", type=int, default=2, help="demonstrator: searches at a time")
+    p.add_argument("--out", type=Path, default=None, help="write the result as JSON (demonstrator: a folder)")
+    p.add_argument("--no-progress", action="store_true")
+    args = p.parse_args(argv)
+    check_cli_args(p, args, counts=("beam_width", "workers"))
+    if args.mode != "demonstrator" and not args.runs:
+        p.error(f"{args.mode} needs --runs")
+    if args.mode == "demonstrator" and (args.out is None or not 0.0 <= args.time_weight < float("inf")):
+        p.error("demonstrator needs --out (a folder) and a --time-weight >= 0")
+    import torch
+
+    torch.set_num_threads(1)
+    t0 = time.perf_counter()
+    try:
+        if args.mode == "fit":
+            res: dict[str, Any] = {"fit": [fit_report(r, args.demos, args.match) for r in args.runs]}
+            print("| run | plans | rows | nll | top-1 | near-equivalent | different | visited: top-1 | different |")
+            print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+            for f in res["fit"]:
+                a, v = f["all"], f["visited"]
+                print(
+                    f"| {f['run']} | {f['plans']} | {a['rows']} | {a['nll']:.3f} | {a['top1']:.3f} | "
+                    f"{a['near_equivalent']:.3f} | {a['different']:.3f} | {v['top1']:.3f} | {v['different']:.3f} |"
+                )
+        elif args.mode == "demonstrator":
+            res = demonstrator_report(
+                args.on, args.out, args.beam_width, args.time_weight, args.workers, not args.no_progress
+            )
+        else:
+            res = ensemble_report(args.runs, args.on)
+    except ConfigError as exc:
+        p.error(str(exc))
+    if "episodes" in res:
+        res["summary"] = s = regret_summary(res["episodes"])
+        print(
+            f"{args.mode} on {args.on}: regret median {s['median']:.3f}, mean {s['mean']:.3f}, "
+            f"{s['at_most_0.6']}/{s['with_regret']} at most 0.6, {s['failures']} failures"
+        )
+    res["seconds"] = round(time.perf_counter() - t0, 1)
+    if args.out is not None:
+        path = args.out / "demonstrator.json" if args.mode == "demonstrator" else args.out
+        path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(path, json.dumps(res, indent=1, default=float) + "\n")
+        print(f"written: {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
