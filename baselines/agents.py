@@ -587,6 +587,18 @@ class PPOAgent:
             action = np.int64(np.asarray(action).item())
         return action, st
 
+    def logits(self, observation: Any) -> np.ndarray:
+        """The discrete policy's logits over the primitives (one per action) for one env observation,
+        after the run's observation transform; a ConfigError for a continuous policy."""
+        if self.algo not in ("discrete", "masked"):
+            raise ConfigError(f"{self.name}: logits need a discrete policy, not algo={self.algo!r}")
+        import torch
+
+        obs = self._obs_fn(observation) if self._obs_fn is not None else observation
+        t, _ = self.model.policy.obs_to_tensor(obs)
+        with torch.no_grad():
+            return np.asarray(self.model.policy.get_distribution(t).distribution.logits[0].numpy())
+
 
 class SSTPlannerAgent:
     """The SST planner (:class:`baselines.sst.SSTAgent`) behind the common interface.

@@ -903,11 +903,16 @@ def test_diagnose_clone_fit_and_ensemble(
     for row, sc in zip(ens["episodes"], SCENARIOS, strict=True):
         assert row["energy_spent"] == run_episode(env, agent, sc, 0, keep_path=False)["energy_spent"]
     assert dc.regret_summary(ens["episodes"])["episodes"] == len(SCENARIOS)
+    obs, _ = env.reset(seed=0, options={"scenario": SCENARIOS[0]})
+    agent.reset(env, 0)
+    assert int(np.argmax(agent.logits(obs))) == int(agent.predict(obs)[0])  # the policy's mode
     for argv, msg in (
         (["ensemble"], "needs --runs"),
         (["ensemble", "--runs", str(tmp_path)], "no model.zip"),
         (["demonstrator", "--on", "val"], "needs --out"),
         (["demonstrator", "--out", str(tmp_path / "d"), "--time-weight", "-1"], "time-weight"),
+        (["ensemble", "--runs", str(out), "--out", str(tmp_path)], "is a folder"),
+        (["fit", "--runs", str(out), "--match", "("], "not a regular expression"),
     ):
         with pytest.raises(SystemExit):
             dc.main(argv)

@@ -186,8 +186,6 @@ def demonstrator_report(
 
 def ensemble_report(runs: list[str], on: str) -> dict[str, Any]:
     """The ``ensemble`` measurement: one deterministic episode per scenario of ``on``."""
-    import torch
-
     from baselines.agents import PPOAgent
     from baselines.evaluation import episode_regret, make_env, ppo_env_kwargs, resolve_scenario, run_episode
     from baselines.reference import load_references
@@ -205,13 +203,8 @@ def ensemble_report(runs: list[str], on: str) -> dict[str, Any]:
                 a.reset(env, seed)
 
         def predict(self, observation: Any, deterministic: bool = True) -> tuple[Any, None]:
-            logits = []
-            for a in agents:
-                o = a._obs_fn(observation) if a._obs_fn is not None else observation
-                t, _ = a.model.policy.obs_to_tensor(o)
-                with torch.no_grad():
-                    logits.append(a.model.policy.get_distribution(t).distribution.logits[0].numpy())
-            return np.int64(int(np.argmax(np.mean(logits, axis=0)))), None
+            mean = np.mean([a.logits(observation) for a in agents], axis=0)
+            return np.int64(int(np.argmax(mean))), None
 
     agent = MeanOfLogits()
     rows = []
@@ -257,6 +250,10 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"{args.mode} needs --runs")
     if args.mode == "demonstrator" and (args.out is None or not 0.0 <= args.time_weight < float("inf")):
         p.error("demonstrator needs --out (a folder) and a --time-weight >= 0")
+    if args.mode == "demonstrator":
+        check_cli_args(p, args, dirs=("out",))
+    elif args.out is not None and args.out.is_dir():
+        p.error(f"--out={str(args.out)!r} is a folder; {args.mode} writes one JSON file")
     import torch
 
     torch.set_num_threads(1)
