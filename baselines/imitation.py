@@ -461,7 +461,7 @@ def pretrain(
     :param value_weight: weight of the critic's loss beside the actor's.
     :param seed: minibatch order.
     :param optimizer: a torch optimizer over the policy's parameters (None: a fresh Adam).
-    :param progress: show a progress bar over the epochs (with the last epoch's loss).
+    :param progress: show a progress bar over the minibatches (with the last epoch and its loss).
     :returns: per epoch the mean actor loss (``nll``), critic loss (``value_mse``) and, for
         Gaussian policies, the mean absolute error of the mean action (``mae``).
     """
@@ -482,7 +482,8 @@ def pretrain(
     total = int(epochs) * per_epoch
     decay = optimizer is None and final_fraction != 1.0
     log: list[dict[str, float]] = []
-    bar = progress_bar(int(epochs), 0, progress, "behaviour cloning", "epoch")
+    # per minibatch: a successor policy's first epoch computes every row's features (minutes)
+    bar = progress_bar(total, 0, progress, "behaviour cloning", "batch")
     policy.set_training_mode(True)
     for e in range(int(epochs)):
         order = gen.permutation(n)
@@ -504,6 +505,8 @@ def pretrain(
             opt.zero_grad()
             loss.backward()
             opt.step()
+            if bar is not None:
+                bar.update(1)
             w = len(idx)
             sums["nll"] += float(nll.detach()) * w
             sums["value_mse"] += float(vloss.detach()) * w
@@ -513,8 +516,7 @@ def pretrain(
                     sums["mae"] += float(torch.mean(torch.abs(mean - act[idx]))) * w
         log.append({k: v / n for k, v in sums.items() if k != "mae" or act.dtype.is_floating_point})
         if bar is not None:
-            bar.set_postfix(nll=f"{log[-1]['nll']:.3f}")
-            bar.update(1)
+            bar.set_postfix(epoch=f"{e + 1}/{epochs}", nll=f"{log[-1]['nll']:.3f}")
     if bar is not None:
         bar.close()
     policy.set_training_mode(False)

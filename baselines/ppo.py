@@ -126,6 +126,9 @@ class TrainConfig:
         flown through the thermals the observation shows and its successor state scored).
     :param scorer_hidden: with ``policy="scoring"`` or ``"successor"``: the widths of the shared
         scoring MLP.
+    :param scorer_estimate: with ``policy="successor"``: also give the scorer the reference search's
+        cost-to-go estimate at each successor (:meth:`baselines.scoring.SuccessorFeatures.estimates`,
+        the heuristic the demonstrations' beam ranks by), in the field the observation shows.
     :param log_std_init: initial log standard deviation of the continuous policy.
     :param shaping: weight of this module's extra potential-based shaping (Ng et al. 1999),
         ``shaping * (gamma * phi(s') - phi(s))`` with ``phi = -d_goal / 1 km``; 0 (default) leaves
@@ -208,6 +211,7 @@ class TrainConfig:
     net_arch: tuple[int, ...] = (128, 128)
     policy: str = "mlp"
     scorer_hidden: tuple[int, ...] = (64, 64)
+    scorer_estimate: bool = False
     log_std_init: float = -0.5
     shaping: float = 0.0
     body_frame: bool | None = None
@@ -272,6 +276,10 @@ class TrainConfig:
         if any(isinstance(n, bool) or not isinstance(n, int) or n < 1 for n in hidden):
             raise ValueError(f"scorer_hidden={hidden!r} must hold integers >= 1")
         object.__setattr__(self, "scorer_hidden", tuple(int(n) for n in hidden))
+        if not isinstance(self.scorer_estimate, bool):
+            raise ValueError(f"scorer_estimate={self.scorer_estimate!r} must be true or false")
+        if self.scorer_estimate and self.policy != "successor":
+            raise ValueError(f"scorer_estimate=True needs policy='successor' (got policy={self.policy!r})")
         if self.ent_coef is None:
             object.__setattr__(self, "ent_coef", 0.01 if self.algo in CONTINUOUS_ALGOS else 0.03)
         object.__setattr__(self, "env_kwargs", dict(self.env_kwargs))
@@ -1330,6 +1338,8 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
                 "net_arch": {"pi": [], "vf": list(config.net_arch)},
                 "scorer": {**make_scorer(_probe(config)), "hidden": list(config.scorer_hidden)},
             }
+            if config.scorer_estimate:
+                policy_kwargs["scorer"]["estimate"] = True
         model = algo_cls(
             policy_cls,
             train_env,

@@ -917,3 +917,37 @@ def test_diagnose_clone_fit_and_ensemble(
         with pytest.raises(SystemExit):
             dc.main(argv)
         assert msg in capsys.readouterr().err
+
+
+def test_diagnose_clone_consistency(ref_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``diagnose_clone.py consistency``: from states along the plans the search plans again; each
+    new plan keeps the old plan's steps before the state, replays through ``env.step`` to its cost,
+    and the cost difference it reports is the new plan's against the old; a rerun resumes."""
+    from baselines.cli import diagnose_clone as dc
+    from baselines.reference import load_references
+
+    out = tmp_path / "cons"
+    res = dc.consistency_report(ref_dir, r"tiny-\d", 3, 0, out, 8, 1.0, 1, False)
+    old, new = load_references(ref_dir), load_references(out / "plans")
+    c = res["consistency"]
+    assert c["states"] == len(res["states"]) >= 2 and 0.0 <= c["agree"] <= 1.0
+    env = gym.make(DISCRETE_ID)
+    for row in res["states"]:
+        base, k = row["state"].rsplit("-conss", 1)
+        was, now = old[base].samplers["primitive"], new[row["state"]].samplers["primitive"]
+        assert now.actions[: int(k)] == was.actions[: int(k)] and now.demo_from == int(k)
+        assert row["plan_primitive"] == was.actions[int(k)] and row["replanned_primitive"] == now.actions[int(k)]
+        assert math.isclose(row["delta_cost"], now.best_cost - was.best_cost)
+        _, info = env.reset(seed=0, options={"scenario": old[base].scenario})
+        for a in now.actions:
+            _, _, term, _, info = env.step(int(a))
+        assert term and info["is_success"] and math.isclose(info["energy_spent"], now.best_cost, rel_tol=1e-9)
+    assert dc.consistency_report(ref_dir, r"tiny-\d", 3, 0, out, 8, 1.0, 1, False) == res  # resumed: same
+    for argv, msg in (
+        (["consistency"], "needs --out"),
+        (["consistency", "--out", str(out), "--samples", "0"], "samples"),
+        (["consistency", "--out", str(out), "--demos", str(ref_dir), "--match", "nothing"], "nothing"),
+    ):
+        with pytest.raises(SystemExit):
+            dc.main(argv)
+        assert msg in capsys.readouterr().err

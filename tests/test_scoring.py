@@ -149,6 +149,11 @@ def test_bad_scoring_settings_are_refused() -> None:
     for bad in ((), "64", (0,), (16.5,), (True,)):
         with pytest.raises(ValueError, match="scorer_hidden"):
             TrainConfig(algo="discrete", policy="scoring", scorer_hidden=bad)  # type: ignore[arg-type]
+    for bad_estimate in ("yes", 1, None):
+        with pytest.raises(ValueError, match="scorer_estimate"):
+            TrainConfig(algo="discrete", policy="successor", scorer_estimate=bad_estimate)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="scorer_estimate=True needs policy='successor'"):
+        TrainConfig(algo="discrete", policy="scoring", scorer_estimate=True)
 
 
 def test_scoring_needs_the_observed_thermals() -> None:
@@ -162,10 +167,10 @@ def test_scoring_needs_the_observed_thermals() -> None:
 # --- the successor-scoring policy -------------------------------------------------------------------
 
 
-def _successor(env: gym.Env) -> object:
+def _successor(env: gym.Env, **kwargs: object) -> object:
     from baselines.scoring import SuccessorFeatures, successor_kwargs
 
-    return SuccessorFeatures(**successor_kwargs(env))
+    return SuccessorFeatures(**successor_kwargs(env), **kwargs)
 
 
 @pytest.mark.parametrize("scenario", ["paper", "random"])
@@ -195,25 +200,70 @@ def test_successor_features_predict_every_flown_edge(scenario: str) -> None:
     assert checked > 20 and goals > 0
 
 
-def test_successor_features_of_the_mirror_image_are_mirrored() -> None:
+@pytest.mark.parametrize("estimate", [False, True])
+def test_successor_features_of_the_mirror_image_are_mirrored(estimate: bool) -> None:
     """The mirror world with the mirrored primitive: the same successor up to the sign of every
-    'right' component and of the turn rates."""
+    'right' component and of the turn rates; the cost-to-go estimates are the same."""
     from baselines.ppo import policy_frame
 
     env = BodyFrameObservation(gym.make(DISCRETE_ID, scenario="random"))
     u = env.unwrapped
     signs = policy_frame(u).mirror_signs(u.observation_names)
     mirror = u.library.mirror_indices()
-    feats = _successor(env)
+    feats = _successor(env, estimate=estimate)
     for seed in range(3):
         obs, _ = env.reset(seed=seed)
         f, fm = feats(obs[None])[0], feats((obs * signs)[None])[0]  # type: ignore[operator]
         flip = np.where(np.isclose(f[mirror], fm, atol=1e-4), 1.0, -1.0).min(axis=0)
         assert np.allclose(f[mirror] * flip, fm, atol=1e-4)
         assert flip[1] < 0 and flip[0] > 0 and flip[7] > 0  # goal right flips; ahead and cost do not
+        if estimate:
+            assert np.all(flip[-5:] > 0)
 
 
-def test_successor_policy_saves_loads_and_predicts_alike(tmp_path: Path) -> None:
+def test_successor_estimates_in_closed_form() -> None:
+    """The search's cost-to-go estimate at each successor: without observed thermals, straight in at
+    one cost per metre (the same for every successor below the goal's top), never below g times the
+    height above that top; with them, the cheapest of straight in and the detours, still floored."""
+    from baselines.scoring import N_SUCCESSOR_BASE, N_SUCCESSOR_SLOT, SuccessorFeatures, successor_kwargs
+    from soaring_env.physics.atmosphere import G
+
+    env = BodyFrameObservation(gym.make(DISCRETE_ID, scenario="random"))
+    kw = successor_kwargs(env)
+    feats = SuccessorFeatures(**kw, estimate=True)
+    k = len(feats.layout.thermals)
+    assert feats.n_features == N_SUCCESSOR_BASE + N_SUCCESSOR_SLOT * k + 2 + k
+    detoured = 0
+    for seed in range(4):
+        obs, _ = env.reset(seed=seed)
+        for calm in (True, False):
+            x = obs.copy()
+            if calm:
+                for present, *_ in feats.layout.thermals:
+                    x[present] = 0.0
+            f = feats(x[None])[0].astype(np.float64)
+            est, rank, det = f[:, -2 - k] * 1e3, f[:, -1 - k] * 1e3, f[:, -k:] * 1e3
+            cost, h, below = f[:, 7] * 1e3, f[:, 4] * 1e3, f[:, 3] * 1e3  # edge cost, height, goal top - h ...
+            d_goal = np.maximum(f[:, 2] * 1e3 - kw["goal_radius"], 0.0)
+            floor = G * (h - (h + below + kw["goal_radius"]))  # g (h - goal top) < 0 below it
+            assert np.allclose(rank, cost + est, atol=0.05)
+            assert np.all(est >= floor - 0.05)
+            assert np.all(est <= np.maximum(det.min(axis=1), floor) + 0.05)
+            assert np.all(np.diff(det, axis=1) >= -1e-3)  # cheapest detour first
+            if calm:
+                lo = (d_goal > 50.0) & (est > floor + 1.0)
+                per_metre = est[lo] / d_goal[lo]
+                assert lo.sum() > 10 and np.ptp(per_metre) < 1e-3 * per_metre.mean()
+                assert 0.1 < per_metre.mean() < 2.0  # J/(kg m): g / (L/D) of a straight glide or cruise
+                assert np.allclose(det, det[:, :1], atol=0.05)  # no thermal: every "detour" is straight in
+                assert np.allclose(est, np.maximum(det[:, 0], floor), atol=0.05)
+            else:
+                detoured += int(np.sum(det[:, 0] < est - 1.0) + np.sum(est < d_goal * per_metre.mean() - 1.0))
+    assert detoured > 0  # some successor is nearer a thermal than straight in pays
+
+
+@pytest.mark.parametrize("estimate", [False, True])
+def test_successor_policy_saves_loads_and_predicts_alike(tmp_path: Path, estimate: bool) -> None:
     import torch
     from stable_baselines3 import PPO
 
@@ -229,7 +279,10 @@ def test_successor_policy_saves_loads_and_predicts_alike(tmp_path: Path) -> None
         n_steps=32,
         batch_size=16,
         n_epochs=1,
-        policy_kwargs={"net_arch": {"pi": [], "vf": [32]}, "scorer": {**successor_kwargs(env), "hidden": [16]}},
+        policy_kwargs={
+            "net_arch": {"pi": [], "vf": [32]},
+            "scorer": {**successor_kwargs(env), "hidden": [16], "estimate": estimate},
+        },
     )
     model.learn(32)  # PPO trains it (the features are fixed functions of the observation)
     _check_saves_and_loads(model, env, tmp_path)

@@ -1,7 +1,7 @@
 """Diagnose a cloned primitive policy (README, round ten): where does its regret come from?
 
-Three measurements for the successor policies of ``scripts/train_ppo.py --algo discrete --set
-'policy="successor"'``, each written as JSON (``--out``) and printed as a table:
+Four measurements for the successor policies of ``scripts/train_ppo.py --algo discrete --set
+'policy="successor"'`` and their demonstrations, each written as JSON (``--out``) and printed:
 
 * ``fit``: how well the policy fits demonstrations (``--demos`` folder, ``--match`` regular
   expression over scenario names): mean negative log-likelihood of the demonstrated primitive, the
@@ -13,6 +13,11 @@ Three measurements for the successor policies of ``scripts/train_ppo.py --algo d
 * ``demonstrator``: the regret of the demonstrator itself (the goal env's own search with the time
   weight and beam width of ``scripts/demos.py``) on scenarios outside its training set, its plans
   replayed through ``env.step`` and scored against ``--reference-dir``.
+* ``consistency`` (README, round eleven): how often the demonstrator labels a state of its own plans
+  as it would from there: from states along the plans (``--match``, default the base plans;
+  ``--samples`` of them, ``--seed``) the same search plans again; the share that picks the plan's
+  next primitive, and whether the other picks are cheaper or dearer. Where the clones agree with
+  the demonstrations far less often than that, their labels are not what holds them back.
 * ``ensemble``: the regret of the runs' policies side by side, the mean of their logits deciding
   (one run: the policy itself, as ``scripts/evaluate.py`` flies it).
 
@@ -25,6 +30,7 @@ Usage::
 
     python scripts/diagnose_clone.py fit --runs results/ppo-score/s3 --match 'random-201[2-7]\\d-s3s\\d+'
     python scripts/diagnose_clone.py demonstrator --on val --out results/ppo-score/round10/demonstrator
+    python scripts/diagnose_clone.py consistency --samples 60 --out results/ppo-score/round11/consistency
     python scripts/diagnose_clone.py ensemble --runs results/ppo-score/s2 results/ppo-score/s3 --on h100
 """
 
@@ -184,6 +190,83 @@ def demonstrator_report(
     return {"on": on, "beam_width": beam_width, "time_weight": time_weight, "episodes": rows}
 
 
+def consistency_report(
+    demos_dir: str | Path,
+    match: str,
+    samples: int,
+    seed: int,
+    out: Path,
+    beam_width: int,
+    time_weight: float,
+    workers: int,
+    progress: bool,
+) -> dict[str, Any]:
+    """The ``consistency`` measurement: from ``samples`` states along the demonstrations' own plans
+    (plans ``match`` selects, drawn with ``seed``; a state after 1 .. n - 2 of a plan's n steps), the
+    same search plans again (kept in ``out/plans`` as ``<name>-conss<k>``; a rerun resumes). Where it
+    picks the plan's next primitive, the demonstrations label that state as their own search
+    would; the cost columns say whether the new plan is cheaper or dearer than the rest of the old."""
+    import math
+
+    import gymnasium as gym
+
+    import soaring_env  # noqa: F401  (registers the ids)
+    from baselines.imitation import demo_plans
+    from baselines.reference import ReferenceConfig, load_references
+    from baselines.reference.runner import run_references
+    from baselines.reference.tasks import reference_config
+
+    env_id = "soaring/Soaring-v0"
+    base = load_references(demos_dir)
+    pool = [(sc, acts) for sc, acts in demo_plans(demos_dir, sampler="primitive", match=match) if len(acts) >= 3]
+    if not pool:
+        raise ConfigError(f"match={match!r}: no plan of 3 or more steps in {str(demos_dir)!r}")
+    rng = np.random.default_rng(seed)
+    starts: dict[str, tuple[Any, int, tuple[Any, ...]]] = {}
+    while len(starts) < min(samples, sum(len(a) - 2 for _, a in pool)):
+        sc, acts = pool[int(rng.integers(len(pool)))]
+        k = int(rng.integers(1, len(acts) - 1))
+        starts.setdefault(f"{sc.name}-conss{k}", (sc, k, acts))
+    env = gym.make(env_id)
+    cfg = reference_config(env, beam_width, time_weight, 0.0)
+    env.close()
+    assert isinstance(cfg, ReferenceConfig)
+    again = run_references(
+        [sc.replace(name=name) for name, (sc, _, _) in starts.items()],
+        out / "plans",
+        samplers=("primitive",),
+        config=cfg,
+        workers=workers,
+        progress=progress,
+        env_id=env_id,
+        prefixes={name: list(acts[:k]) for name, (_, k, acts) in starts.items()},
+        env_kwargs=None,
+    )
+    rows = []
+    for name, (sc, k, acts) in starts.items():
+        new = again[name].samplers["primitive"]
+        old_cost = base[sc.name].samplers["primitive"].best_cost
+        rows.append(
+            {
+                "state": name,
+                "plan_primitive": int(acts[k]),
+                "replanned_primitive": int(new.actions[k]) if len(new.actions) > k else None,
+                "delta_cost": float(new.best_cost - old_cost) if math.isfinite(new.best_cost) else math.inf,
+            }
+        )
+    agree = np.array([r["plan_primitive"] == r["replanned_primitive"] for r in rows])
+    delta = np.array([r["delta_cost"] for r in rows])
+    summary = {
+        "states": len(rows),
+        "agree": float(agree.mean()),
+        "cheaper_by_more_than_5": int((delta < -5.0).sum()),
+        "dearer_by_more_than_5": int((delta > 5.0).sum()),
+        "other_primitive_within_5": int((~agree & (np.abs(delta) <= 5.0)).sum()),
+        "median_delta_where_other": float(np.median(delta[~agree])) if (~agree).any() else 0.0,
+    }
+    return {"demos": str(demos_dir), "match": match, "seed": seed, "states": rows, "consistency": summary}
+
+
 def ensemble_report(runs: list[str], on: str) -> dict[str, Any]:
     """The ``ensemble`` measurement: one deterministic episode per scenario of ``on``."""
     from baselines.agents import PPOAgent
@@ -234,23 +317,35 @@ def regret_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point; returns the exit status."""
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("mode", choices=("fit", "demonstrator", "ensemble"))
+    p.add_argument("mode", choices=("fit", "demonstrator", "consistency", "ensemble"))
     p.add_argument("--runs", nargs="+", default=[], help="successor-policy runs (fit: each; ensemble: together)")
     p.add_argument("--demos", default="results/reference-train-prim-t1", help="fit: the demonstrations' folder")
-    p.add_argument("--match", default=None, help="fit: only the scenario names matching this regular expression")
+    p.add_argument(
+        "--match",
+        default=None,
+        help="fit, consistency: only the scenario names matching this regular expression (consistency: "
+        "default the base plans, random-20\\d\\d\\d)",
+    )
+    p.add_argument("--samples", type=int, default=60, help="consistency: states to plan again from")
+    p.add_argument("--seed", type=int, default=0, help="consistency: which states")
     p.add_argument("--on", choices=sorted(SETS), default="val", help="demonstrator / ensemble: scenario set")
-    p.add_argument("--beam-width", type=int, default=250, help="demonstrator: the search's beam width")
-    p.add_argument("--time-weight", type=float, default=1.0, help="demonstrator: its time weight [J/kg per s]")
-    p.add_argument("--workers", type=int, default=2, help="demonstrator: searches at a time")
-    p.add_argument("--out", type=Path, default=None, help="write the result as JSON (demonstrator: a folder)")
+    p.add_argument("--beam-width", type=int, default=250, help="demonstrator, consistency: the search's beam width")
+    p.add_argument(
+        "--time-weight", type=float, default=1.0, help="demonstrator, consistency: its time weight [J/kg per s]"
+    )
+    p.add_argument("--workers", type=int, default=2, help="demonstrator, consistency: searches at a time")
+    p.add_argument(
+        "--out", type=Path, default=None, help="write the result as JSON (demonstrator, consistency: a folder)"
+    )
     p.add_argument("--no-progress", action="store_true")
     args = p.parse_args(argv)
-    check_cli_args(p, args, counts=("beam_width", "workers"))
-    if args.mode != "demonstrator" and not args.runs:
+    check_cli_args(p, args, counts=("beam_width", "workers", "samples"))
+    searches = args.mode in ("demonstrator", "consistency")
+    if not searches and not args.runs:
         p.error(f"{args.mode} needs --runs")
-    if args.mode == "demonstrator" and (args.out is None or not 0.0 <= args.time_weight < float("inf")):
-        p.error("demonstrator needs --out (a folder) and a --time-weight >= 0")
-    if args.mode == "demonstrator":
+    if searches and (args.out is None or not 0.0 <= args.time_weight < float("inf")):
+        p.error(f"{args.mode} needs --out (a folder) and a --time-weight >= 0")
+    if searches:
         check_cli_args(p, args, dirs=("out",))
     elif args.out is not None and args.out.is_dir():
         p.error(f"--out={str(args.out)!r} is a folder; {args.mode} writes one JSON file")
@@ -273,6 +368,25 @@ def main(argv: list[str] | None = None) -> int:
             res = demonstrator_report(
                 args.on, args.out, args.beam_width, args.time_weight, args.workers, not args.no_progress
             )
+        elif args.mode == "consistency":
+            res = consistency_report(
+                args.demos,
+                args.match if args.match is not None else r"random-20\d\d\d",
+                args.samples,
+                args.seed,
+                args.out,
+                args.beam_width,
+                args.time_weight,
+                args.workers,
+                not args.no_progress,
+            )
+            c = res["consistency"]
+            print(
+                f"consistency of {c['states']} states: the search picks the plan's primitive again at "
+                f"{c['agree']:.2f}; its new plan is cheaper than the old by > 5 J/kg at "
+                f"{c['cheaper_by_more_than_5']}, dearer at {c['dearer_by_more_than_5']}; another primitive "
+                f"within 5 J/kg at {c['other_primitive_within_5']}"
+            )
         else:
             res = ensemble_report(args.runs, args.on)
     except ConfigError as exc:
@@ -285,7 +399,7 @@ def main(argv: list[str] | None = None) -> int:
         )
     res["seconds"] = round(time.perf_counter() - t0, 1)
     if args.out is not None:
-        path = args.out / "demonstrator.json" if args.mode == "demonstrator" else args.out
+        path = args.out / f"{args.mode}.json" if searches else args.out
         path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write_text(path, json.dumps(res, indent=1, default=float) + "\n")
         print(f"written: {path}")

@@ -677,7 +677,7 @@ def _beam(
         ce = end[keep]
         jk = j[keep]
         d_goal = np.maximum(np.hypot(ce[:, S_N] - gn, ce[:, S_E] - ge) - gr, 0.0)
-        rank = jk + _cost_to_go_estimate(ce, d_goal, per_metre, g_top, lift, (gn, ge), ctx.descent)
+        rank = jk + cost_to_go_estimate(ce, d_goal, per_metre, g_top, lift, (gn, ge), ctx.descent)
         if cfg.progress_weight:
             rank = rank + cfg.progress_weight * per_metre * d_goal
         key = _cell_keys(ce, cfg, ctx)
@@ -731,13 +731,16 @@ def _beam(
     return (best_obj, best_cost, np.array(path_states[::-1]), ctrls[np.array(path_ctrls[::-1])]), rollouts, depth
 
 
-def thermal_values(model: SoaringModel, controls: np.ndarray) -> np.ndarray:
+def thermal_values(
+    model: SoaringModel, controls: np.ndarray, offsets: Sequence[float] = (0.0, 20.0), n_courses: int = 4
+) -> np.ndarray:
     """Per thermal that the action set can climb in: (north [m], east [m], value [J/(kg m)]) rows,
     the value being what one metre of climb there is worth, ``-cost / dh`` of the cheapest (most
     negative) climbing edge from near the centre (g for a zero-thrust climb; less where the climb
-    needs thrust). Starts: 0 and 20 m from the centre at t = 0, four courses, at the start
-    height (clipped to 50 m .. zi - 100 m). A thermal with a life cycle is valued when it is first
-    mature after t = 0 (at max(0, birth + rise), its centre drifted there); one dead by then has none."""
+    needs thrust). Starts: ``offsets`` [m] from the centre at t = 0 (the search's: 0 and 20 m),
+    ``n_courses`` courses (its: four), at the start height (clipped to 50 m .. zi - 100 m). A
+    thermal with a life cycle is valued when it is first mature after t = 0 (at max(0, birth +
+    rise), its centre drifted there); one dead by then has none."""
     sc = model.scenario
     rows = []
     problem = SoaringProblem(model, "primitive" if controls.shape[1] == 1 else "continuous")
@@ -748,8 +751,8 @@ def thermal_values(model: SoaringModel, controls: np.ndarray) -> np.ndarray:
             continue
         cn, ce = (t.north, t.east) if tm == 0.0 else (float(c) for c in sc.field.centres(tm)[j])
         starts = []
-        for off in (0.0, 20.0):
-            for chi in (0.0, 0.5 * math.pi, math.pi - 1e-9, -0.5 * math.pi):
+        for off in offsets:
+            for chi in (0.0, 0.5 * math.pi, math.pi - 1e-9, -0.5 * math.pi)[:n_courses]:
                 n, e = cn + off * math.cos(chi + 0.5 * math.pi), ce + off * math.sin(chi + 0.5 * math.pi)
                 if bool(sc.bounds.contains(n, e, h)):
                     starts.append([n, e, chi, h, tm, math.nan])
@@ -766,7 +769,7 @@ def thermal_values(model: SoaringModel, controls: np.ndarray) -> np.ndarray:
     return np.array(rows, dtype=np.float64).reshape(-1, 3)
 
 
-def _cost_to_go_estimate(s, d_goal, per_metre, g_top, lift, goal_ne, descent=0.0) -> np.ndarray:
+def cost_to_go_estimate(s, d_goal, per_metre, g_top, lift, goal_ne, descent=0.0) -> np.ndarray:
     """The ranking heuristic of the module docstring, per state row of ``s``: the cheaper of flying
     straight in (``eps d``) and of a detour through a thermal j that climbs to the goal top there
     (``eps (d_j + d_j,goal) - value_j max(0, h_top - h)``), but at least ``g (h - h_top)``; with a
@@ -845,4 +848,5 @@ __all__ = [
     "search",
     "smallest_descent",
     "still_air_cost_per_metre",
+    "thermal_values",
 ]
