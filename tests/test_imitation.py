@@ -903,6 +903,16 @@ def test_diagnose_clone_fit_and_ensemble(
     for row, sc in zip(ens["episodes"], SCENARIOS, strict=True):
         assert row["energy_spent"] == run_episode(env, agent, sc, 0, keep_path=False)["energy_spent"]
     assert dc.regret_summary(ens["episodes"])["episodes"] == len(SCENARIOS)
+    led = dc.ensemble_report([str(out)], "tiny", lead=99, plans_dir=ref_dir)  # the plans all the way
+    for row, sc in zip(led["episodes"], SCENARIOS, strict=True):
+        plan = json.loads((ref_dir / f"{sc.name}.json").read_text())["samplers"]["primitive"]
+        assert row["success"] and math.isclose(row["energy_spent"], plan["best_cost"], rel_tol=1e-9)
+    with pytest.raises(ConfigError, match="needs --plans"):
+        dc.ensemble_report([str(out)], "tiny", lead=1)
+    with pytest.raises(ConfigError, match="no plan of"):
+        empty = tmp_path / "no-plans"
+        empty.mkdir()
+        dc.ensemble_report([str(out)], "tiny", lead=1, plans_dir=empty)
     obs, _ = env.reset(seed=0, options={"scenario": SCENARIOS[0]})
     agent.reset(env, 0)
     assert int(np.argmax(agent.logits(obs))) == int(agent.predict(obs)[0])  # the policy's mode
@@ -913,6 +923,7 @@ def test_diagnose_clone_fit_and_ensemble(
         (["demonstrator", "--out", str(tmp_path / "d"), "--time-weight", "-1"], "time-weight"),
         (["ensemble", "--runs", str(out), "--out", str(tmp_path)], "is a folder"),
         (["fit", "--runs", str(out), "--match", "("], "not a regular expression"),
+        (["ensemble", "--runs", str(out), "--lead", "-1"], "--lead"),
     ):
         with pytest.raises(SystemExit):
             dc.main(argv)

@@ -19,7 +19,9 @@ Four measurements for the successor policies of ``scripts/train_ppo.py --algo di
   next primitive, and whether the other picks are cheaper or dearer. Where the clones agree with
   the demonstrations far less often than that, their labels are not what holds them back.
 * ``ensemble``: the regret of the runs' policies side by side, the mean of their logits deciding
-  (one run: the policy itself, as ``scripts/evaluate.py`` flies it).
+  (one run: the policy itself, as ``scripts/evaluate.py`` flies it); ``--lead N --plans DIR``: the
+  first N steps flown by the demonstrator's plans (a ``demonstrator`` run's ``plans`` folder), the
+  policy taking over from there (README, round eleven: where in the flight the clones lose).
 
 Scenario sets (``--on``): ``val`` = ``random-5000 ... 5019`` against ``results/reference-val``
 (narrow primitive references, made for this round), ``h21`` = ``paper`` + ``random-10000 ...
@@ -267,37 +269,60 @@ def consistency_report(
     return {"demos": str(demos_dir), "match": match, "seed": seed, "states": rows, "consistency": summary}
 
 
-def ensemble_report(runs: list[str], on: str) -> dict[str, Any]:
-    """The ``ensemble`` measurement: one deterministic episode per scenario of ``on``."""
+def ensemble_report(runs: list[str], on: str, lead: int = 0, plans_dir: str | Path | None = None) -> dict[str, Any]:
+    """The ``ensemble`` measurement: one deterministic episode per scenario of ``on``; with ``lead``
+    > 0 the first ``lead`` steps are those of the demonstrator's plan of the scenario (the plans of
+    a ``demonstrator`` run, ``plans_dir``), the policy flying on from there."""
     from baselines.agents import PPOAgent
     from baselines.evaluation import episode_regret, make_env, ppo_env_kwargs, resolve_scenario, run_episode
     from baselines.reference import load_references
 
     names, ref_dir = SETS[on]
     refs = load_references(ref_dir)
+    scenarios = [resolve_scenario(n, {}) for n in names]
+    led: dict[str, list[Any]] = {}
+    if lead > 0:
+        if plans_dir is None:
+            raise ConfigError("--lead needs --plans (the plans folder of a demonstrator run)")
+        found = load_references(plans_dir)
+        missing = [sc.name for sc in scenarios if sc.name not in found]
+        if missing:
+            raise ConfigError(
+                f"--plans={str(plans_dir)!r} has no plan of {', '.join(missing[:3])} (run demonstrator --on {on})"
+            )
+        led = {sc.name: list(found[sc.name].samplers["primitive"].actions[:lead]) for sc in scenarios}
     agents = [PPOAgent(_run_dir(r) / "model.zip") for r in runs]
     env = make_env(agents[0].env_id, ppo_env_kwargs(agents[0].config))
 
     class MeanOfLogits:
-        """The runs side by side: the primitive with the largest mean logit."""
+        """The runs side by side: the primitive with the largest mean logit (after the lead)."""
+
+        def __init__(self) -> None:
+            self.lead: list[Any] = []  # this episode's first steps
+            self.steps = 0
 
         def reset(self, env: Any, seed: int | None = None) -> None:
             for a in agents:
                 a.reset(env, seed)
+            self.steps = 0
 
         def predict(self, observation: Any, deterministic: bool = True) -> tuple[Any, None]:
+            k, self.steps = self.steps, self.steps + 1
+            if k < len(self.lead):
+                return np.int64(int(self.lead[k])), None
             mean = np.mean([a.logits(observation) for a in agents], axis=0)
             return np.int64(int(np.argmax(mean))), None
 
     agent = MeanOfLogits()
     rows = []
-    for n in names:
-        ep = run_episode(env, agent, resolve_scenario(n, {}), 0, keep_path=False)
+    for n, sc in zip(names, scenarios, strict=True):
+        agent.lead = led.get(sc.name, [])
+        ep = run_episode(env, agent, sc, 0, keep_path=False)
         ep.update(scenario=n, env_id=agents[0].env_id)
         r = episode_regret(ep, refs)
         rows.append({"scenario": n, "success": ep["success"], "energy_spent": ep["energy_spent"], "regret": r})
     env.close()
-    return {"on": on, "runs": [str(_run_dir(r)) for r in runs], "episodes": rows}
+    return {"on": on, "runs": [str(_run_dir(r)) for r in runs], "lead": lead, "episodes": rows}
 
 
 def regret_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
@@ -327,6 +352,8 @@ def main(argv: list[str] | None = None) -> int:
         "default the base plans, random-20\\d\\d\\d)",
     )
     p.add_argument("--samples", type=int, default=60, help="consistency: states to plan again from")
+    p.add_argument("--lead", type=int, default=0, help="ensemble: the first N steps from the demonstrator's plans")
+    p.add_argument("--plans", default=None, help="ensemble with --lead: a demonstrator run's plans folder")
     p.add_argument("--seed", type=int, default=0, help="consistency: which states")
     p.add_argument("--on", choices=sorted(SETS), default="val", help="demonstrator / ensemble: scenario set")
     p.add_argument("--beam-width", type=int, default=250, help="demonstrator, consistency: the search's beam width")
@@ -340,6 +367,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--no-progress", action="store_true")
     args = p.parse_args(argv)
     check_cli_args(p, args, counts=("beam_width", "workers", "samples"))
+    if args.lead < 0:
+        p.error(f"--lead={args.lead!r} must be >= 0 (steps)")
     searches = args.mode in ("demonstrator", "consistency")
     if not searches and not args.runs:
         p.error(f"{args.mode} needs --runs")
@@ -388,7 +417,7 @@ def main(argv: list[str] | None = None) -> int:
                 f"within 5 J/kg at {c['other_primitive_within_5']}"
             )
         else:
-            res = ensemble_report(args.runs, args.on)
+            res = ensemble_report(args.runs, args.on, args.lead, args.plans)
     except ConfigError as exc:
         p.error(str(exc))
     if "episodes" in res:
