@@ -65,6 +65,9 @@ SETS: dict[str, tuple[list[str], str]] = {
     "h100": (["paper"] + [f"random-{10000 + i}" for i in range(100)], "results/reference-heldout100"),
 }
 
+#: The env the demonstrations were planned and flown in.
+DEMO_ENV_ID = "soaring/Soaring-v0"
+
 # feature columns of baselines.scoring.SuccessorFeatures (N_SUCCESSOR_BASE entries first)
 _GOAL_DIST, _HEIGHT, _COST = 2, 4, 7
 
@@ -149,6 +152,42 @@ def fit_report(run: str | Path, demos_dir: str | Path, match: str | None) -> dic
     }
 
 
+def _demo_search(
+    scenarios: list[Any],
+    out_dir: Path,
+    prefixes: dict[str, list[Any]],
+    beam_width: int,
+    time_weight: float,
+    workers: int,
+    progress: bool,
+) -> dict[str, Any]:
+    """The demonstrations' own search (the goal env's, as ``scripts/demos.py`` runs it) on
+    ``scenarios`` after the env actions ``prefixes`` (by name), its plans kept in ``out_dir`` (a
+    rerun resumes): the references by scenario name."""
+    import gymnasium as gym
+
+    import soaring_env  # noqa: F401  (registers the ids)
+    from baselines.reference import ReferenceConfig
+    from baselines.reference.runner import run_references
+    from baselines.reference.tasks import reference_config
+
+    env = gym.make(DEMO_ENV_ID)
+    cfg = reference_config(env, beam_width, time_weight, 0.0)
+    env.close()
+    assert isinstance(cfg, ReferenceConfig)  # the goal task's search (not the climb's horizon search)
+    return run_references(
+        scenarios,
+        out_dir,
+        samplers=("primitive",),
+        config=cfg,
+        workers=workers,
+        progress=progress,
+        env_id=DEMO_ENV_ID,
+        prefixes=prefixes,
+        env_kwargs=None,
+    )
+
+
 def demonstrator_report(
     on: str, out: Path, beam_width: int, time_weight: float, workers: int, progress: bool
 ) -> dict[str, Any]:
@@ -156,28 +195,15 @@ def demonstrator_report(
     ``out/plans``; a rerun resumes), replayed through ``env.step`` and scored."""
     import gymnasium as gym
 
-    import soaring_env  # noqa: F401  (registers the ids)
-    from baselines.reference import ReferenceConfig, load_references
-    from baselines.reference.runner import run_references
-    from baselines.reference.tasks import reference_config
+    from baselines.reference import load_references
     from soaring_env.scenario import get_scenario
 
     names, ref_dir = SETS[on]
-    env = gym.make("soaring/Soaring-v0")
-    cfg = reference_config(env, beam_width, time_weight, 0.0)
-    assert isinstance(cfg, ReferenceConfig)  # the goal task's search (not the climb's horizon search)
-    run_references(
-        [get_scenario(n) for n in names],
-        out / "plans",
-        samplers=("primitive",),
-        config=cfg,
-        workers=workers,
-        progress=progress,
-        env_id="soaring/Soaring-v0",
-        prefixes={},
-        env_kwargs=None,
+    plans = _demo_search(
+        [get_scenario(n) for n in names], out / "plans", {}, beam_width, time_weight, workers, progress
     )
-    plans, refs = load_references(out / "plans"), load_references(ref_dir)
+    refs = load_references(ref_dir)
+    env = gym.make(DEMO_ENV_ID)
     rows = []
     for n in names:
         _, info = env.reset(seed=0, options={"scenario": get_scenario(n)})
@@ -210,15 +236,9 @@ def consistency_report(
     would; the cost columns say whether the new plan is cheaper or dearer than the rest of the old."""
     import math
 
-    import gymnasium as gym
-
-    import soaring_env  # noqa: F401  (registers the ids)
     from baselines.imitation import demo_plans
-    from baselines.reference import ReferenceConfig, load_references
-    from baselines.reference.runner import run_references
-    from baselines.reference.tasks import reference_config
+    from baselines.reference import load_references
 
-    env_id = "soaring/Soaring-v0"
     base = load_references(demos_dir)
     pool = [(sc, acts) for sc, acts in demo_plans(demos_dir, sampler="primitive", match=match) if len(acts) >= 3]
     if not pool:
@@ -229,20 +249,14 @@ def consistency_report(
         sc, acts = pool[int(rng.integers(len(pool)))]
         k = int(rng.integers(1, len(acts) - 1))
         starts.setdefault(f"{sc.name}-conss{k}", (sc, k, acts))
-    env = gym.make(env_id)
-    cfg = reference_config(env, beam_width, time_weight, 0.0)
-    env.close()
-    assert isinstance(cfg, ReferenceConfig)
-    again = run_references(
+    again = _demo_search(
         [sc.replace(name=name) for name, (sc, _, _) in starts.items()],
         out / "plans",
-        samplers=("primitive",),
-        config=cfg,
-        workers=workers,
-        progress=progress,
-        env_id=env_id,
-        prefixes={name: list(acts[:k]) for name, (_, k, acts) in starts.items()},
-        env_kwargs=None,
+        {name: list(acts[:k]) for name, (_, k, acts) in starts.items()},
+        beam_width,
+        time_weight,
+        workers,
+        progress,
     )
     rows = []
     for name, (sc, k, acts) in starts.items():
