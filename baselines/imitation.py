@@ -63,6 +63,9 @@ class Demonstrations:
     :param plan_costs: the reference cost of each plan [J/kg].
     :param weights: the weight of each row in the fit (float32; 1 but for the states a DAgger round
         visited, see :func:`demonstrations`).
+    :param accepted: discrete actions only, optional: ``(N, n_actions)`` bool, the actions each row
+        accepts as its label (the demonstrated one among them): :func:`pretrain` then fits the
+        probability of the set, not of the one action. None (default): the demonstrated action alone.
     """
 
     observations: np.ndarray
@@ -72,6 +75,7 @@ class Demonstrations:
     scenarios: tuple[str, ...]
     plan_costs: tuple[float, ...]
     weights: np.ndarray
+    accepted: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.observations.shape[0])
@@ -290,6 +294,7 @@ def rows(demos: Demonstrations, index: np.ndarray) -> Demonstrations:
         returns=demos.returns[index],
         episode=demos.episode[index],
         weights=demos.weights[index],
+        accepted=None if demos.accepted is None else demos.accepted[index],
     )
 
 
@@ -308,6 +313,12 @@ def with_mirror_images(
     signs = np.asarray(obs_signs, np.float32)
     if signs.shape != demos.observations.shape[1:]:
         raise ConfigError(f"obs_signs has shape {signs.shape}; expected {demos.observations.shape[1:]}")
+    accepted = None
+    if demos.accepted is not None:  # the mirrored row accepts the mirror images of the row's actions
+        image = np.asarray(mirror_action(np.arange(demos.accepted.shape[1])), np.int64)
+        flipped = np.empty_like(demos.accepted)
+        flipped[:, image] = demos.accepted
+        accepted = np.concatenate([demos.accepted, flipped])
     return Demonstrations(
         observations=np.concatenate([demos.observations, demos.observations * signs]),
         actions=np.concatenate([demos.actions, np.asarray(mirror_action(demos.actions), demos.actions.dtype)]),
@@ -316,6 +327,7 @@ def with_mirror_images(
         scenarios=demos.scenarios + tuple(f"{n}~mirror" for n in demos.scenarios),
         plan_costs=demos.plan_costs + demos.plan_costs,
         weights=np.concatenate([demos.weights, demos.weights]),
+        accepted=accepted,
     )
 
 
@@ -445,8 +457,9 @@ def pretrain(
     progress: bool = False,
 ) -> list[dict[str, float]]:
     """Fit an SB3 ``ActorCriticPolicy`` to ``demos``: the actor by the negative log-likelihood of the
-    demonstrated actions, the critic by least squares on the returns-to-go, each row weighted by
-    ``demos.weights`` (a weighted mean per minibatch; with all weights 1 the plain mean).
+    demonstrated actions (with ``demos.accepted``: of the set of actions each row accepts, the log
+    of their summed probability), the critic by least squares on the returns-to-go, each row
+    weighted by ``demos.weights`` (a weighted mean per minibatch; with all weights 1 the plain mean).
 
     By default the policy's own optimizer is left alone (a fresh Adam here, so that PPO's starts
     clean); ``optimizer`` fits with a given one instead (PPO's, when rehearsing the demonstrations
@@ -475,6 +488,9 @@ def pretrain(
     act = torch.as_tensor(demos.actions)
     ret = torch.as_tensor(demos.returns)
     wts = torch.as_tensor(demos.weights) if bool(np.any(demos.weights != 1.0)) else None
+    accepted = None if demos.accepted is None else torch.as_tensor(demos.accepted, dtype=torch.bool)
+    if accepted is not None and (act.dtype.is_floating_point or accepted.shape[0] != len(act)):
+        raise ConfigError(f"pretrain: accepted of shape {tuple(accepted.shape)} needs one row per discrete action")
     opt = optimizer if optimizer is not None else torch.optim.Adam(policy.parameters(), lr=learning_rate)
     gen = np.random.default_rng(seed)
     n = len(demos)
@@ -494,7 +510,12 @@ def pretrain(
                 for g in opt.param_groups:
                     g["lr"] = learning_rate * (1.0 - (1.0 - final_fraction) * frac)
             idx = torch.as_tensor(order[start : start + batch_size])
-            values, log_prob, _ = policy.evaluate_actions(obs[idx], act[idx])
+            if accepted is None:
+                values, log_prob, _ = policy.evaluate_actions(obs[idx], act[idx])
+            else:  # log of the accepted set's probability (Categorical's logits are log-probabilities)
+                values = policy.predict_values(obs[idx])
+                lp = policy.get_distribution(obs[idx]).distribution.logits
+                log_prob = torch.logsumexp(lp.masked_fill(~accepted[idx], -math.inf), dim=1)
             sq = (values.flatten() - ret[idx]) ** 2
             if wts is None:
                 nll, vloss = -log_prob.mean(), torch.mean(sq)

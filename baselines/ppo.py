@@ -129,6 +129,14 @@ class TrainConfig:
     :param scorer_estimate: with ``policy="successor"``: also give the scorer the reference search's
         cost-to-go estimate at each successor (:meth:`baselines.scoring.SuccessorFeatures.estimates`,
         the heuristic the demonstrations' beam ranks by), in the field the observation shows.
+    :param scorer_lift: with ``policy="successor"``: also give the scorer the updraft the observed
+        field has at each successor's end point and on a 20 m ring around it
+        (:meth:`baselines.scoring.SuccessorFeatures.lift_at`): where the next edge can climb.
+    :param demo_equivalents: with ``policy="successor"`` and ``demos``: each row's label is the set
+        of primitives whose successor is near-equivalent to the demonstrated one's (end point
+        within 50 m, height within 10 m, edge cost within 20 J/kg:
+        :func:`baselines.scoring.near_equivalent`), and the cloning fits the set's summed
+        probability, so the policy need not learn the search's tie-breaks. Default off.
     :param log_std_init: initial log standard deviation of the continuous policy.
     :param shaping: weight of this module's extra potential-based shaping (Ng et al. 1999),
         ``shaping * (gamma * phi(s') - phi(s))`` with ``phi = -d_goal / 1 km``; 0 (default) leaves
@@ -212,6 +220,8 @@ class TrainConfig:
     policy: str = "mlp"
     scorer_hidden: tuple[int, ...] = (64, 64)
     scorer_estimate: bool = False
+    scorer_lift: bool = False
+    demo_equivalents: bool = False
     log_std_init: float = -0.5
     shaping: float = 0.0
     body_frame: bool | None = None
@@ -280,6 +290,14 @@ class TrainConfig:
             raise ValueError(f"scorer_estimate={self.scorer_estimate!r} must be true or false")
         if self.scorer_estimate and self.policy != "successor":
             raise ValueError(f"scorer_estimate=True needs policy='successor' (got policy={self.policy!r})")
+        if not isinstance(self.scorer_lift, bool):
+            raise ValueError(f"scorer_lift={self.scorer_lift!r} must be true or false")
+        if self.scorer_lift and self.policy != "successor":
+            raise ValueError(f"scorer_lift=True needs policy='successor' (got policy={self.policy!r})")
+        if not isinstance(self.demo_equivalents, bool):
+            raise ValueError(f"demo_equivalents={self.demo_equivalents!r} must be true or false")
+        if self.demo_equivalents and self.policy != "successor":
+            raise ValueError(f"demo_equivalents=True needs policy='successor' (got policy={self.policy!r})")
         if self.ent_coef is None:
             object.__setattr__(self, "ent_coef", 0.01 if self.algo in CONTINUOUS_ALGOS else 0.03)
         object.__setattr__(self, "env_kwargs", dict(self.env_kwargs))
@@ -302,6 +320,8 @@ class TrainConfig:
             raise ValueError(f"demo_rehearsal={self.demo_rehearsal!r} must be an integer >= 0")
         if self.demo_rehearsal and self.demos is None:
             raise ValueError("demo_rehearsal needs demos")
+        if self.demo_equivalents and self.demos is None:
+            raise ValueError("demo_equivalents=True needs demos")
         f = self.demo_starts
         if isinstance(f, bool) or not isinstance(f, (int, float)) or not 0.0 <= f <= 1.0:
             raise ValueError(f"demo_starts={f!r} must be a number in [0, 1]")
@@ -1187,6 +1207,12 @@ def _clone_demos(model: Any, config: TrainConfig, out: Path) -> tuple[dict[str, 
             raise ValueError("demo_mirror needs body_frame=True (the mirror image is taken in the aircraft's frame)")
         signs = policy_frame(probe, config.final_glide).mirror_signs(probe.observation_names)
         demos = with_mirror_images(plans, signs, mirror_action)
+    if config.demo_equivalents:
+        from baselines.scoring import accepted_successors
+
+        scorer = model.policy.mlp_extractor.policy_net
+        acc = accepted_successors(scorer.features, demos.observations, demos.actions, bool(config.progress_bar))
+        demos = dataclasses.replace(demos, accepted=acc)
     torch.manual_seed(config.seed)
     losses: list[dict[str, float]] = []
     if config.demo_epochs:
@@ -1340,6 +1366,8 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
             }
             if config.scorer_estimate:
                 policy_kwargs["scorer"]["estimate"] = True
+            if config.scorer_lift:
+                policy_kwargs["scorer"]["lift"] = True
         model = algo_cls(
             policy_cls,
             train_env,

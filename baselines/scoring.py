@@ -315,6 +315,32 @@ class PrimitiveScoringPolicy(ActorCriticPolicy):
 #: successor first) present, ahead/right, distance, peak, radius.
 N_SUCCESSOR_BASE = 14
 N_SUCCESSOR_SLOT = 6
+#: Radius [m] of the ring :meth:`SuccessorFeatures.lift_at` averages the updraft over: about the
+#: turn radius of the primitives' tightest circles (1080 degrees in 30 s at 10-15 m/s: 16-24 m).
+LIFT_RING_M = 20.0
+#: Near-equivalent successors: end points within this [m] of each other, heights within this [m]
+#: and edge costs within this [J/kg] -- e.g. a 360 against a 720 degree circle (README, round twelve).
+NEAR_POSITION_M = 50.0
+NEAR_HEIGHT_M = 10.0
+NEAR_COST = 20.0
+
+
+def near_equivalent(ends: np.ndarray, costs: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """(B, A) bool: which of each row's A successors are near-equivalent to its successor ``reference``.
+
+    :param ends: (B, A, 4) the successors' states ``[Pn, Pe, chi, h]`` [m, m, rad, m] in one frame
+        per row (e.g. :meth:`SuccessorFeatures.flown`'s end points); the course plays no part.
+    :param costs: (B, A) the edges' costs [J/kg].
+    :param reference: (B,) a primitive per row (e.g. the demonstrated one; always near itself).
+    """
+    e, c = np.asarray(ends, np.float64), np.asarray(costs, np.float64)
+    i = np.arange(len(e))
+    ref, ref_cost = e[i, np.asarray(reference, np.int64)][:, None, :], c[i, np.asarray(reference, np.int64)][:, None]
+    return (
+        (np.hypot(e[..., 0] - ref[..., 0], e[..., 1] - ref[..., 1]) <= NEAR_POSITION_M)
+        & (np.abs(e[..., 3] - ref[..., 3]) <= NEAR_HEIGHT_M)
+        & (np.abs(c - ref_cost) <= NEAR_COST)
+    )
 
 
 class SuccessorFeatures:
@@ -348,6 +374,7 @@ class SuccessorFeatures:
         cache_rows: int = 65_536,
         estimate: bool = False,
         height_max: float = 1500.0,
+        lift: bool = False,
     ) -> None:
         from collections import OrderedDict
 
@@ -375,6 +402,9 @@ class SuccessorFeatures:
         self.n_features = N_SUCCESSOR_BASE + N_SUCCESSOR_SLOT * len(self.layout.thermals)
         if self.estimate:
             self.n_features += 2 + len(self.layout.thermals)
+        self.lift = bool(lift)
+        if self.lift:
+            self.n_features += 2
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         x = np.ascontiguousarray(obs, dtype=np.float32)
@@ -478,7 +508,24 @@ class SuccessorFeatures:
             f = np.column_stack([f, st.reshape(n, -1)])
         if self.estimate:
             f = np.column_stack([f, self.estimates(obs, end, r.cost) / km])
+        if self.lift:
+            f = np.column_stack([f, self.lift_at(obs, end) / lay.updraft_scale])
         return f.astype(np.float32)
+
+    def lift_at(self, obs: np.ndarray, end: np.ndarray) -> np.ndarray:
+        """(174, 2) the updraft [m/s] the field the observation shows has at each successor ``end``
+        (rows ``[Pn, Pe, chi, h]`` in the aircraft's frame): at the end point, and the mean over a
+        ring of ``LIFT_RING_M`` around it at the same height (what a tight circle there would
+        meet). Where the next edge can climb, before the scorer has to infer it from the
+        thermal's offset, peak and radius (``scorer_lift``)."""
+        field = self.field(obs)
+        ang = np.linspace(0.0, 2.0 * math.pi, 8, endpoint=False)
+        n = end[:, 0:1] + LIFT_RING_M * np.cos(ang)[None, :]
+        e = end[:, 1:2] + LIFT_RING_M * np.sin(ang)[None, :]
+        h = np.maximum(end[:, 3:4], 0.0)
+        centre = field.updraft(end[:, 0], end[:, 1], np.maximum(end[:, 3], 0.0))
+        ring = field.updraft(n, e, np.broadcast_to(h, n.shape)).mean(axis=1)
+        return np.column_stack([centre, ring])
 
     def estimates(self, obs: np.ndarray, end: np.ndarray, cost: np.ndarray) -> np.ndarray:
         """(174, 2 + K) cost-to-go estimates [J/kg] of the successors ``end`` (rows ``[Pn, Pe, chi,
@@ -547,6 +594,30 @@ def successor_kwargs(env: Any) -> dict[str, Any]:
         "goal_radius": float(sc.require_goal().radius),
         "height_max": float(sc.bounds.height_max),
     }
+
+
+def accepted_successors(
+    features: SuccessorFeatures, observations: np.ndarray, actions: np.ndarray, progress: bool = False
+) -> np.ndarray:
+    """(N, 174) bool: the primitives whose successor is near-equivalent (:func:`near_equivalent`)
+    to that of each row's primitive ``actions``, the 174 edges flown from each body-frame
+    observation through the field it shows (:meth:`SuccessorFeatures.flown`; about 4 ms a row) --
+    the labels of a cloning that does not ask the policy to tell a 360 from a 720 degree circle
+    (``demo_equivalents``), and the ``near-equivalent`` share of ``scripts/diagnose_clone.py fit``.
+    """
+    from baselines._runs import progress_bar
+
+    obs = np.asarray(observations, np.float64)
+    out = np.empty((len(obs), len(features.library)), bool)
+    bar = progress_bar(len(obs), 0, progress, "near-equivalent successors", "row")
+    for k, (row, a) in enumerate(zip(obs, np.asarray(actions, np.int64), strict=True)):
+        r = features.flown(row)
+        out[k] = near_equivalent(r.states[None, :, -1, :], r.cost[None], np.array([a]))[0]
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
+    return out
 
 
 class SuccessorScorer(nn.Module):

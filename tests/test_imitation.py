@@ -205,6 +205,55 @@ def test_weighted_cloning_fits_the_weighted_mean_of_conflicting_labels() -> None
         env.close()
 
 
+def test_set_labels_fit_the_probability_of_the_set() -> None:
+    """``accepted`` labels: one observation whose label accepts primitives {3, 40} is fitted until
+    the two together hold nearly all the probability (either alone need not); a label that accepts
+    only the demonstrated action gives the plain cloning's losses bit for bit; the mirror image
+    of a row accepts the mirror images of its actions; a set that does not fit is refused."""
+    import torch
+    from stable_baselines3 import PPO
+
+    from baselines.imitation import Demonstrations, rows, with_mirror_images
+
+    env = _env(DISCRETE_ID)(SCENARIOS[0])
+    obs, _ = env.reset(seed=0)
+    n = int(env.action_space.n)
+    base = Demonstrations(
+        observations=np.stack([obs, obs]).astype(np.float32),
+        actions=np.array([3, 3], np.int64),
+        returns=np.zeros(2, np.float32),
+        episode=np.array([0, 1]),
+        scenarios=("a", "b"),
+        plan_costs=(0.0, 0.0),
+        weights=np.ones(2, np.float32),
+    )
+    acc = np.zeros((2, n), bool)
+    acc[:, [3, 40]] = True
+
+    def fit(demos: Demonstrations, epochs: int) -> tuple[list[dict[str, float]], np.ndarray]:
+        torch.manual_seed(0)
+        model = PPO("MlpPolicy", env, seed=0, device="cpu", policy_kwargs={"net_arch": [16]})
+        log = pretrain(model.policy, demos, epochs=epochs, learning_rate=1e-2, batch_size=2, seed=0)
+        with torch.no_grad():
+            dist = model.policy.get_distribution(torch.as_tensor(demos.observations[:1])).distribution
+        return log, dist.probs.numpy()[0]
+
+    _, p = fit(dataclasses.replace(base, accepted=acc), 300)
+    assert p[3] + p[40] > 0.98
+    single = np.zeros((2, n), bool)
+    single[:, 3] = True
+    assert fit(dataclasses.replace(base, accepted=single), 5)[0] == fit(base, 5)[0]
+    mirror_prim = env.unwrapped.library.mirror_indices()
+    ones = np.ones(obs.shape, np.float32)
+    both = with_mirror_images(dataclasses.replace(base, accepted=acc), ones, lambda a: mirror_prim[a])
+    assert both.accepted is not None and both.accepted.shape == (4, n)
+    assert set(np.flatnonzero(both.accepted[2])) == {int(mirror_prim[3]), int(mirror_prim[40])}
+    assert np.array_equal(rows(both, np.array([2])).accepted, both.accepted[2:3])
+    with pytest.raises(ConfigError, match="accepted"):
+        fit(dataclasses.replace(base, accepted=acc[:1]), 1)
+    env.close()
+
+
 def test_cloning_step_size_falls_linearly_and_bad_settings_are_refused(monkeypatch: pytest.MonkeyPatch) -> None:
     """Closed form: 3 epochs of 2 minibatches step at lr * (1 - (1 - f) * k / 5), k = 0 ... 5; a
     constant step size by default; a fraction outside [0, 1] is refused."""

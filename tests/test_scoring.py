@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -154,6 +155,17 @@ def test_bad_scoring_settings_are_refused() -> None:
             TrainConfig(algo="discrete", policy="successor", scorer_estimate=bad_estimate)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="scorer_estimate=True needs policy='successor'"):
         TrainConfig(algo="discrete", policy="scoring", scorer_estimate=True)
+    with pytest.raises(ValueError, match="scorer_lift"):
+        TrainConfig(algo="discrete", policy="successor", scorer_lift="yes")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="scorer_lift=True needs policy='successor'"):
+        TrainConfig(algo="discrete", policy="scoring", scorer_lift=True)
+    for bad_set in ("yes", 1, None):
+        with pytest.raises(ValueError, match="demo_equivalents"):
+            TrainConfig(algo="discrete", policy="successor", demos="d", demo_equivalents=bad_set)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="demo_equivalents=True needs policy='successor'"):
+        TrainConfig(algo="discrete", policy="scoring", demos="d", demo_equivalents=True)
+    with pytest.raises(ValueError, match="demo_equivalents=True needs demos"):
+        TrainConfig(algo="discrete", policy="successor", demo_equivalents=True)
 
 
 def test_scoring_needs_the_observed_thermals() -> None:
@@ -200,8 +212,8 @@ def test_successor_features_predict_every_flown_edge(scenario: str) -> None:
     assert checked > 20 and goals > 0
 
 
-@pytest.mark.parametrize("estimate", [False, True])
-def test_successor_features_of_the_mirror_image_are_mirrored(estimate: bool) -> None:
+@pytest.mark.parametrize(("estimate", "lift"), [(False, False), (True, False), (False, True)])
+def test_successor_features_of_the_mirror_image_are_mirrored(estimate: bool, lift: bool) -> None:
     """The mirror world with the mirrored primitive: the same successor up to the sign of every
     'right' component and of the turn rates; the cost-to-go estimates are the same."""
     from baselines.ppo import policy_frame
@@ -210,7 +222,7 @@ def test_successor_features_of_the_mirror_image_are_mirrored(estimate: bool) -> 
     u = env.unwrapped
     signs = policy_frame(u).mirror_signs(u.observation_names)
     mirror = u.library.mirror_indices()
-    feats = _successor(env, estimate=estimate)
+    feats = _successor(env, estimate=estimate, lift=lift)
     for seed in range(3):
         obs, _ = env.reset(seed=seed)
         f, fm = feats(obs[None])[0], feats((obs * signs)[None])[0]  # type: ignore[operator]
@@ -219,6 +231,8 @@ def test_successor_features_of_the_mirror_image_are_mirrored(estimate: bool) -> 
         assert flip[1] < 0 and flip[0] > 0 and flip[7] > 0  # goal right flips; ahead and cost do not
         if estimate:
             assert np.all(flip[-5:] > 0)
+        if lift:
+            assert np.all(flip[-2:] > 0)
 
 
 def test_successor_estimates_in_closed_form() -> None:
@@ -262,8 +276,8 @@ def test_successor_estimates_in_closed_form() -> None:
     assert detoured > 0  # some successor is nearer a thermal than straight in pays
 
 
-@pytest.mark.parametrize("estimate", [False, True])
-def test_successor_policy_saves_loads_and_predicts_alike(tmp_path: Path, estimate: bool) -> None:
+@pytest.mark.parametrize(("estimate", "lift"), [(False, False), (True, False), (False, True)])
+def test_successor_policy_saves_loads_and_predicts_alike(tmp_path: Path, estimate: bool, lift: bool) -> None:
     import torch
     from stable_baselines3 import PPO
 
@@ -281,11 +295,41 @@ def test_successor_policy_saves_loads_and_predicts_alike(tmp_path: Path, estimat
         n_epochs=1,
         policy_kwargs={
             "net_arch": {"pi": [], "vf": [32]},
-            "scorer": {**successor_kwargs(env), "hidden": [16], "estimate": estimate},
+            "scorer": {**successor_kwargs(env), "hidden": [16], "estimate": estimate, "lift": lift},
         },
     )
     model.learn(32)  # PPO trains it (the features are fixed functions of the observation)
     _check_saves_and_loads(model, env, tmp_path)
+
+
+def test_successor_lift_features_in_closed_form() -> None:
+    """The lift features: zero in calm air. With one thermal observed exactly where the straight
+    primitive 0 ends, that successor's end-point feature is the rebuilt field's updraft in the
+    core, above half the observed peak, and the ring's is the mean of the field at eight points
+    20 m around it, lower than the core's (Allen's bell falls off from the centre)."""
+    from baselines.scoring import LIFT_RING_M, N_SUCCESSOR_BASE, N_SUCCESSOR_SLOT
+
+    env = BodyFrameObservation(gym.make(DISCRETE_ID, scenario="paper"))
+    feats: Any = _successor(env, lift=True)
+    lay = feats.layout
+    assert feats.n_features == N_SUCCESSOR_BASE + N_SUCCESSOR_SLOT * len(lay.thermals) + 2
+    obs, _ = env.reset(seed=0)
+    calm = obs.copy()
+    for present, *_ in lay.thermals:
+        calm[present] = 0.0
+    assert np.all(feats(calm[None])[0][:, -2:] == 0.0)
+    end = feats.flown(calm.astype(np.float64)).states[0, -1, :]  # primitive 0 flies straight
+    present, ia, ir, ipk, irad = lay.thermals[0]
+    x = calm.copy()
+    x[present], x[ia], x[ir], x[ipk], x[irad] = 1.0, end[0] / lay.position_scale, end[1] / lay.position_scale, 0.8, 0.08
+    f = feats(x[None])[0].astype(np.float64) * lay.updraft_scale
+    field = feats.field(x.astype(np.float64))
+    end = feats.flown(x.astype(np.float64)).states[0, -1, :]  # the same point, higher in the lift
+    ang = np.linspace(0.0, 2.0 * math.pi, 8, endpoint=False)
+    ring = field.updraft(end[0] + LIFT_RING_M * np.cos(ang), end[1] + LIFT_RING_M * np.sin(ang), np.full(8, end[3]))
+    assert np.isclose(f[0, -2], float(field.updraft(end[0], end[1], end[3])), atol=1e-5)
+    assert f[0, -2] > 0.5 * 0.8 * lay.updraft_scale
+    assert np.isclose(f[0, -1], ring.mean(), atol=1e-5) and f[0, -1] < f[0, -2]
 
 
 def test_successor_needs_height_and_airspeed_entries() -> None:
@@ -310,3 +354,42 @@ def test_successor_features_refuse_non_finite_observations() -> None:
         feats(bad[None])  # type: ignore[operator]
     with pytest.raises(ConfigError, match="finite"):
         feats(obs)  # type: ignore[operator]  (one row, not a batch)
+
+
+def test_near_equivalent_successors_in_closed_form() -> None:
+    """Near-equivalence to a row's reference successor: end points within 50 m, heights within
+    10 m and edge costs within 20 J/kg, each bound inclusive, the course ignored; the reference is
+    always near itself. Two end points at the same distance from the goal on opposite sides of it
+    are not near."""
+    from baselines.scoring import near_equivalent
+
+    ends = np.zeros((1, 7, 4))
+    ends[0, :, 0] = [1000.0, 1030.0, 1000.0, 1000.0, 1000.0, 1000.0, -1000.0]  # north [m]
+    ends[0, :, 1] = [0.0, 40.0, 0.0, 0.0, 0.0, 0.0, 0.0]  # east: 50 m from the first
+    ends[0, :, 2] = [0.0, 1.0, 2.0, 3.0, 0.0, 0.0, 0.0]  # courses differ
+    ends[0, :, 3] = [500.0, 500.0, 510.0, 500.0, 500.0, 500.0, 500.0]
+    costs = np.array([[100.0, 100.0, 100.0, 120.0, 121.0, 100.0, 100.0]])
+    ends[0, 5, 1] = 51.0
+    assert near_equivalent(ends, costs, np.array([0])).tolist() == [[True, True, True, True, False, False, False]]
+    assert near_equivalent(ends, costs, np.array([6]))[0].tolist() == [False] * 6 + [True]
+
+
+def test_accepted_successors_are_the_near_equivalents_of_the_demonstrated_one() -> None:
+    """On real observations: the accepted set holds the demonstrated primitive and exactly the
+    primitives :func:`near_equivalent` finds among the edges flown from the observation; a
+    straight primitive is not near a spiral."""
+    from baselines.scoring import SuccessorFeatures, accepted_successors, near_equivalent, successor_kwargs
+
+    env = gym.make(DISCRETE_ID, scenario="random")
+    frame = BodyFrameObservation(env)
+    feats = SuccessorFeatures(**successor_kwargs(env))
+    obs = np.stack([frame.reset(seed=s)[0] for s in range(3)])
+    act = np.array([0, 17, 120])
+    acc = accepted_successors(feats, obs, act)
+    assert acc.shape == (3, 174) and acc[np.arange(3), act].all()
+    for k in range(3):
+        r = feats.flown(obs[k].astype(np.float64))
+        assert np.array_equal(acc[k], near_equivalent(r.states[None, :, -1, :], r.cost[None], act[k : k + 1])[0])
+    spiral = env.unwrapped.library.table[:, COL_FAMILY] == SPIRAL
+    assert not acc[0, spiral].any()  # primitive 0 flies straight
+    assert 1 < acc.sum() < 3 * 174

@@ -6,10 +6,12 @@ Four measurements for the successor policies of ``scripts/train_ppo.py --algo di
 * ``fit``: how well the policy fits demonstrations (``--demos`` folder, ``--match`` regular
   expression over scenario names): mean negative log-likelihood of the demonstrated primitive, the
   share of rows whose most likely primitive is the demonstrated one, and the share of the other
-  rows whose successor is *near-equivalent* to the demonstrated one (goal distance within
-  ``NEAR_GOAL_M``, height within ``NEAR_HEIGHT_M``, edge cost within ``NEAR_COST`` -- e.g. a 360
-  against a 720 degree circle) or *different* (everything else); separately for the rows a
-  DAgger round labelled (a visited state: the first row of a ``-<tag>s<k>`` plan).
+  rows whose successor is *near-equivalent* to the demonstrated one
+  (:func:`baselines.scoring.near_equivalent`: end points within 50 m, heights within 10 m, edge
+  costs within 20 J/kg -- e.g. a 360 against a 720 degree circle; before round twelve: the goal
+  distance instead of the end point, README) or *different* (everything
+  else); separately for the rows a DAgger round labelled (a visited state: the first row of a
+  ``-<tag>s<k>`` plan).
 * ``demonstrator``: the regret of the demonstrator itself (the goal env's own search with the time
   weight and beam width of ``scripts/demos.py``) on scenarios outside its training set, its plans
   replayed through ``env.step`` and scored against ``--reference-dir``.
@@ -52,12 +54,6 @@ from baselines._runs import check_cli_args
 from soaring_env._validation import ConfigError
 from soaring_env.scenario import atomic_write_text
 
-#: Near-equivalent successors (``fit``): goal distance within this [m], height within this [m] and
-#: edge cost within this [J/kg] of the demonstrated successor's.
-NEAR_GOAL_M = 50.0
-NEAR_HEIGHT_M = 10.0
-NEAR_COST = 20.0
-
 #: The scenario sets of ``--on``: (names, reference folder).
 SETS: dict[str, tuple[list[str], str]] = {
     "val": ([f"random-{5000 + i}" for i in range(20)], "results/reference-val"),
@@ -67,9 +63,6 @@ SETS: dict[str, tuple[list[str], str]] = {
 
 #: The env the demonstrations were planned and flown in.
 DEMO_ENV_ID = "soaring/Soaring-v0"
-
-# feature columns of baselines.scoring.SuccessorFeatures (N_SUCCESSOR_BASE entries first)
-_GOAL_DIST, _HEIGHT, _COST = 2, 4, 7
 
 
 def _run_dir(run: str | Path) -> Path:
@@ -101,6 +94,7 @@ def fit_report(run: str | Path, demos_dir: str | Path, match: str | None) -> dic
     """The ``fit`` measurement of one run on the demonstrations that ``match`` selects."""
     from baselines.imitation import demonstrations
     from baselines.ppo import load_model, make_eval_env
+    from baselines.scoring import accepted_successors
 
     d = _run_dir(run)
     c = json.loads((d / "config.json").read_text())["config"]
@@ -120,13 +114,7 @@ def fit_report(run: str | Path, demos_dir: str | Path, match: str | None) -> dic
     lp = lp - np.log(np.exp(lp).sum(axis=1, keepdims=True))
     i = np.arange(len(act))
     best = lg.argmax(axis=1)
-    feats = model.policy.mlp_extractor.policy_net.features(obs)
-    fa, fb = feats[i, act], feats[i, best]
-    near = (
-        (np.abs(fa[:, _GOAL_DIST] - fb[:, _GOAL_DIST]) * 1000.0 <= NEAR_GOAL_M)
-        & (np.abs(fa[:, _HEIGHT] - fb[:, _HEIGHT]) * 1000.0 <= NEAR_HEIGHT_M)
-        & (np.abs(fa[:, _COST] - fb[:, _COST]) * 1000.0 <= NEAR_COST)
-    )
+    near = accepted_successors(model.policy.mlp_extractor.policy_net.features, obs, act)[i, best]
     right = best == act
     visited = np.zeros(len(act), bool)
     starts = np.r_[True, plans.episode[1:] != plans.episode[:-1]]
