@@ -956,6 +956,18 @@ def test_diagnose_clone_fit_and_ensemble(
     for row, sc in zip(led["episodes"], SCENARIOS, strict=True):
         plan = json.loads((ref_dir / f"{sc.name}.json").read_text())["samplers"]["primitive"]
         assert row["success"] and math.isclose(row["energy_spent"], plan["best_cost"], rel_tol=1e-9)
+    # a bonus that no other logit can beat keeps the first primitive all the way
+    stuck = dc.ensemble_report([str(out)], "tiny", repeat_bonus=1e9)
+    for row, sc in zip(stuck["episodes"], SCENARIOS, strict=True):
+        a0 = int(np.argmax(agent.logits(env.reset(seed=0, options={"scenario": sc})[0])))
+        env.reset(seed=0, options={"scenario": sc})
+        done = False
+        while not done:
+            _, _, term, trunc, info = env.step(a0)
+            done = term or trunc
+        assert row["energy_spent"] == info["energy_spent"]
+    with pytest.raises(ConfigError, match="repeat-bonus"):
+        dc.ensemble_report([str(out)], "tiny", repeat_bonus=-1.0)
     with pytest.raises(ConfigError, match="needs --plans"):
         dc.ensemble_report([str(out)], "tiny", lead=1)
     with pytest.raises(ConfigError, match="no plan of"):
@@ -973,6 +985,7 @@ def test_diagnose_clone_fit_and_ensemble(
         (["ensemble", "--runs", str(out), "--out", str(tmp_path)], "is a folder"),
         (["fit", "--runs", str(out), "--match", "("], "not a regular expression"),
         (["ensemble", "--runs", str(out), "--lead", "-1"], "--lead"),
+        (["ensemble", "--runs", str(out), "--repeat-bonus", "nan"], "--repeat-bonus"),
     ):
         with pytest.raises(SystemExit):
             dc.main(argv)

@@ -23,7 +23,8 @@ Four measurements for the successor policies of ``scripts/train_ppo.py --algo di
 * ``ensemble``: the regret of the runs' policies side by side, the mean of their logits deciding
   (one run: the policy itself, as ``scripts/evaluate.py`` flies it); ``--lead N --plans DIR``: the
   first N steps flown by the demonstrator's plans (a ``demonstrator`` run's ``plans`` folder), the
-  policy taking over from there (README, round eleven: where in the flight the clones lose).
+  policy taking over from there (README, round eleven: where in the flight the clones lose);
+  ``--repeat-bonus B``: the primitive flown last gets B added to its logit (round twelve).
 
 Scenario sets (``--on``): ``val`` = ``random-5000 ... 5019`` against ``results/reference-val``
 (narrow primitive references, made for this round), ``h21`` = ``paper`` + ``random-10000 ...
@@ -42,6 +43,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import re
 import sys
 import time
@@ -271,10 +273,16 @@ def consistency_report(
     return {"demos": str(demos_dir), "match": match, "seed": seed, "states": rows, "consistency": summary}
 
 
-def ensemble_report(runs: list[str], on: str, lead: int = 0, plans_dir: str | Path | None = None) -> dict[str, Any]:
+def ensemble_report(
+    runs: list[str], on: str, lead: int = 0, plans_dir: str | Path | None = None, repeat_bonus: float = 0.0
+) -> dict[str, Any]:
     """The ``ensemble`` measurement: one deterministic episode per scenario of ``on``; with ``lead``
     > 0 the first ``lead`` steps are those of the demonstrator's plan of the scenario (the plans of
-    a ``demonstrator`` run, ``plans_dir``), the policy flying on from there."""
+    a ``demonstrator`` run, ``plans_dir``), the policy flying on from there; with ``repeat_bonus``
+    > 0 the primitive flown last gets that much added to its mean logit (README, round twelve:
+    does keeping a manoeuvre help?)."""
+    if not (isinstance(repeat_bonus, (int, float)) and 0.0 <= repeat_bonus < math.inf):
+        raise ConfigError(f"--repeat-bonus={repeat_bonus!r} must be a finite number >= 0 (logit units)")
     from baselines.agents import PPOAgent
     from baselines.evaluation import episode_regret, make_env, ppo_env_kwargs, resolve_scenario, run_episode
     from baselines.reference import load_references
@@ -302,18 +310,24 @@ def ensemble_report(runs: list[str], on: str, lead: int = 0, plans_dir: str | Pa
         def __init__(self) -> None:
             self.lead: list[Any] = []  # this episode's first steps
             self.steps = 0
+            self.last = -1  # the primitive flown last (-1: none yet)
 
         def reset(self, env: Any, seed: int | None = None) -> None:
             for a in agents:
                 a.reset(env, seed)
             self.steps = 0
+            self.last = -1
 
         def predict(self, observation: Any, deterministic: bool = True) -> tuple[Any, None]:
             k, self.steps = self.steps, self.steps + 1
             if k < len(self.lead):
-                return np.int64(int(self.lead[k])), None
-            mean = np.mean([a.logits(observation) for a in agents], axis=0)
-            return np.int64(int(np.argmax(mean))), None
+                self.last = int(self.lead[k])
+            else:
+                mean = np.mean([a.logits(observation) for a in agents], axis=0)
+                if self.last >= 0:
+                    mean[self.last] += repeat_bonus
+                self.last = int(np.argmax(mean))
+            return np.int64(self.last), None
 
     agent = MeanOfLogits()
     rows = []
@@ -324,7 +338,13 @@ def ensemble_report(runs: list[str], on: str, lead: int = 0, plans_dir: str | Pa
         r = episode_regret(ep, refs)
         rows.append({"scenario": n, "success": ep["success"], "energy_spent": ep["energy_spent"], "regret": r})
     env.close()
-    return {"on": on, "runs": [str(_run_dir(r)) for r in runs], "lead": lead, "episodes": rows}
+    return {
+        "on": on,
+        "runs": [str(_run_dir(r)) for r in runs],
+        "lead": lead,
+        "repeat_bonus": float(repeat_bonus),
+        "episodes": rows,
+    }
 
 
 def regret_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
@@ -356,6 +376,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--samples", type=int, default=60, help="consistency: states to plan again from")
     p.add_argument("--lead", type=int, default=0, help="ensemble: the first N steps from the demonstrator's plans")
     p.add_argument("--plans", default=None, help="ensemble with --lead: a demonstrator run's plans folder")
+    p.add_argument(
+        "--repeat-bonus", type=float, default=0.0, help="ensemble: added to the logit of the primitive flown last"
+    )
     p.add_argument("--seed", type=int, default=0, help="consistency: which states")
     p.add_argument("--on", choices=sorted(SETS), default="val", help="demonstrator / ensemble: scenario set")
     p.add_argument("--beam-width", type=int, default=250, help="demonstrator, consistency: the search's beam width")
@@ -419,7 +442,7 @@ def main(argv: list[str] | None = None) -> int:
                 f"within 5 J/kg at {c['other_primitive_within_5']}"
             )
         else:
-            res = ensemble_report(args.runs, args.on, args.lead, args.plans)
+            res = ensemble_report(args.runs, args.on, args.lead, args.plans, args.repeat_bonus)
     except ConfigError as exc:
         p.error(str(exc))
     if "episodes" in res:
