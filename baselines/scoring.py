@@ -333,9 +333,13 @@ def near_equivalent(ends: np.ndarray, costs: np.ndarray, reference: np.ndarray) 
     :param costs: (B, A) the edges' costs [J/kg].
     :param reference: (B,) a primitive per row (e.g. the demonstrated one; always near itself).
     """
-    e, c = np.asarray(ends, np.float64), np.asarray(costs, np.float64)
+    e, c, k = np.asarray(ends, np.float64), np.asarray(costs, np.float64), np.asarray(reference, np.int64)
+    if e.ndim != 3 or e.shape[2] < 4 or c.shape != e.shape[:2] or k.shape != e.shape[:1]:
+        raise ConfigError(
+            f"near_equivalent: ends {e.shape}, costs {c.shape} and reference {k.shape} must be (B, A, 4), (B, A), (B,)"
+        )
     i = np.arange(len(e))
-    ref, ref_cost = e[i, np.asarray(reference, np.int64)][:, None, :], c[i, np.asarray(reference, np.int64)][:, None]
+    ref, ref_cost = e[i, k][:, None, :], c[i, k][:, None]
     return (
         (np.hypot(e[..., 0] - ref[..., 0], e[..., 1] - ref[..., 1]) <= NEAR_POSITION_M)
         & (np.abs(e[..., 3] - ref[..., 3]) <= NEAR_HEIGHT_M)
@@ -357,6 +361,9 @@ class SuccessorFeatures:
     edge cost [kJ/kg], whether the edge reaches the goal region (``goal_radius``, fixed by the task
     and not in the observation) or the ground, and the primitive's own settings. The domain's
     bounds are not in the observation and play no part.
+
+    ``estimate`` appends the reference search's cost-to-go estimates (:meth:`estimates`), ``lift``
+    the updraft at and around each successor's end point (:meth:`lift_at`).
 
     A cache (``cache_rows`` observations, least recently used out) keeps the features of rows seen
     again: behaviour cloning and PPO's epochs score the same observations many times.

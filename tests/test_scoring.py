@@ -362,6 +362,7 @@ def test_near_equivalent_successors_in_closed_form() -> None:
     always near itself. Two end points at the same distance from the goal on opposite sides of it
     are not near."""
     from baselines.scoring import near_equivalent
+    from soaring_env._validation import ConfigError
 
     ends = np.zeros((1, 7, 4))
     ends[0, :, 0] = [1000.0, 1030.0, 1000.0, 1000.0, 1000.0, 1000.0, -1000.0]  # north [m]
@@ -372,6 +373,10 @@ def test_near_equivalent_successors_in_closed_form() -> None:
     ends[0, 5, 1] = 51.0
     assert near_equivalent(ends, costs, np.array([0])).tolist() == [[True, True, True, True, False, False, False]]
     assert near_equivalent(ends, costs, np.array([6]))[0].tolist() == [False] * 6 + [True]
+    with pytest.raises(ConfigError, match="near_equivalent"):
+        near_equivalent(ends[0], costs, np.array([0]))
+    with pytest.raises(ConfigError, match="near_equivalent"):
+        near_equivalent(ends, costs[:, :3], np.array([0]))
 
 
 def test_accepted_successors_are_the_near_equivalents_of_the_demonstrated_one() -> None:
