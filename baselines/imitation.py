@@ -66,6 +66,10 @@ class Demonstrations:
     :param accepted: discrete actions only, optional: ``(N, n_actions)`` bool, the actions each row
         accepts as its label (the demonstrated one among them): :func:`pretrain` then fits the
         probability of the set, not of the one action. None (default): the demonstrated action alone.
+    :param costs_to_go: ``(N,)`` float32, the cost [J/kg] of each row's plan from that row on, in
+        the objective its search minimised: the remaining edge costs plus the search's time weight
+        [J/kg per s] times the remaining flight time (the env's clock: whole steps) -- what
+        :func:`pretrain`'s ``q_weight`` fits the demonstrated action's logit to. None: not recorded.
     """
 
     observations: np.ndarray
@@ -76,6 +80,7 @@ class Demonstrations:
     plan_costs: tuple[float, ...]
     weights: np.ndarray
     accepted: np.ndarray | None = None
+    costs_to_go: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.observations.shape[0])
@@ -119,6 +124,7 @@ def demonstrations(
     ret_rows: list[np.ndarray] = []
     ep_rows: list[np.ndarray] = []
     w_rows: list[np.ndarray] = []
+    q_rows: list[np.ndarray] = []
     used: list[str] = []
     costs: list[float] = []
     for name in chosen:
@@ -129,6 +135,8 @@ def demonstrations(
         try:
             obs, _ = env.reset(seed=0)
             rewards: list[float] = []
+            edge_costs: list[float] = []
+            times: list[float] = [0.0]
             info: dict[str, Any] = {}
             terminated = truncated = False
             first = int(ref.demo_from)  # a DAgger plan: the policy's own steps first, not imitated
@@ -145,6 +153,8 @@ def demonstrations(
                     act_rows.append(u)
                 obs, r, terminated, truncated, info = env.step(u)
                 rewards.append(float(r))
+                edge_costs.append(float(info["edge_cost"]))
+                times.append(float(info["time"]))
         finally:
             env.close()
         if not (terminated and info.get("is_success")):
@@ -158,6 +168,10 @@ def demonstrations(
             acc = rewards[k] + gamma * acc
             g[k] = acc
         ret_rows.append(g[first:])
+        # the search's objective from each step on: edge costs plus its time weight times the time left
+        time_weight = float(ref.settings.get("time_weight", 0.0))
+        q = np.cumsum(edge_costs[::-1])[::-1] + time_weight * (times[-1] - np.asarray(times[:-1]))
+        q_rows.append(q[first:])
         ep_rows.append(np.full(len(rewards) - first, len(used), np.int64))
         w = np.ones(len(rewards) - first, np.float32)
         if first > 0:
@@ -179,6 +193,7 @@ def demonstrations(
         scenarios=tuple(used),
         plan_costs=tuple(costs),
         weights=np.concatenate(w_rows),
+        costs_to_go=np.concatenate(q_rows).astype(np.float32),
     )
 
 
@@ -295,6 +310,7 @@ def rows(demos: Demonstrations, index: np.ndarray) -> Demonstrations:
         episode=demos.episode[index],
         weights=demos.weights[index],
         accepted=None if demos.accepted is None else demos.accepted[index],
+        costs_to_go=None if demos.costs_to_go is None else demos.costs_to_go[index],
     )
 
 
@@ -328,6 +344,7 @@ def with_mirror_images(
         plan_costs=demos.plan_costs + demos.plan_costs,
         weights=np.concatenate([demos.weights, demos.weights]),
         accepted=accepted,
+        costs_to_go=None if demos.costs_to_go is None else np.concatenate([demos.costs_to_go, demos.costs_to_go]),
     )
 
 
@@ -443,6 +460,55 @@ def visited_prefixes(
     ]
 
 
+def sampled_episodes(
+    env: gym.Env,
+    logits: Callable[[Any], np.ndarray],
+    scenario: Scenario,
+    *,
+    samples: int,
+    temperature: float,
+    seed: int,
+) -> list[dict[str, Any]]:
+    """Fly ``scenario`` once with the policy's mode and ``samples`` times drawing each action from
+    ``softmax(logits / temperature)``: the episodes self-imitation chooses from.
+
+    :param env: a discrete env with the policy's observation transform (reset with the scenario).
+    :param logits: observation -> the policy's logits over the actions.
+    :param samples: sampled episodes (>= 1).
+    :param temperature: > 0; 1 samples the policy itself, smaller values stay nearer its mode.
+    :param seed: the draws of sampled episode k come from ``default_rng([seed, k])``.
+    :returns: the greedy episode, then the sampled ones: per episode its ``actions``,
+        ``energy_spent`` [J/kg], ``flight_time`` [s] and ``success`` (reached the goal).
+    """
+    samples = check_int("samples", samples, 1)
+    if not (isinstance(temperature, (int, float)) and 0.0 < temperature < math.inf):
+        raise ConfigError(f"temperature={temperature!r} must be a finite number > 0")
+    out: list[dict[str, Any]] = []
+    for k in range(-1, samples):
+        gen = None if k < 0 else np.random.default_rng([int(seed), k])
+        obs, info = env.reset(seed=0, options={"scenario": scenario})
+        actions: list[int] = []
+        terminated = truncated = False
+        while not (terminated or truncated):
+            z = np.asarray(logits(obs), np.float64)
+            if gen is None:
+                a = int(np.argmax(z))
+            else:  # the Gumbel-max trick: argmax of logits / T plus Gumbel noise samples softmax(logits / T)
+                a = int(np.argmax(z / temperature + gen.gumbel(size=z.shape)))
+            actions.append(a)
+            obs, _, terminated, truncated, info = env.step(a)
+        base: Any = env.unwrapped
+        out.append(
+            {
+                "actions": actions,
+                "energy_spent": float(info["energy_spent"]),
+                "flight_time": float(base.time),
+                "success": bool(terminated and info.get("is_success", False)),
+            }
+        )
+    return out
+
+
 def pretrain(
     policy: Any,
     demos: Demonstrations,
@@ -452,6 +518,7 @@ def pretrain(
     final_fraction: float = 1.0,
     batch_size: int = 256,
     value_weight: float = 0.5,
+    q_weight: float = 0.0,
     seed: int = 0,
     optimizer: Any = None,
     progress: bool = False,
@@ -472,11 +539,20 @@ def pretrain(
         this fraction of ``learning_rate`` at the last one (1: constant; ignored with ``optimizer``).
     :param batch_size: rows per minibatch.
     :param value_weight: weight of the critic's loss beside the actor's.
+    :param q_weight: discrete policies with ``demos.costs_to_go``: weight of a loss that reads the
+        raw logits as costs, ``Q(s, a) = beta - alpha * logit(s, a)`` [kJ/kg] (``alpha > 0`` and
+        ``beta`` fitted alongside), and fits the demonstrated action's ``Q`` to the plan's cost from
+        that row on, by least squares (DQfD's supervised loss, without its TD part). The cross-entropy
+        alone leaves each row's logits free up to a constant; this ties them across rows to what the
+        successor is worth, so that states seen in other plans inform a row's ranking. 0 (default): off.
+        Needs a fresh optimizer.
     :param seed: minibatch order.
     :param optimizer: a torch optimizer over the policy's parameters (None: a fresh Adam).
     :param progress: show a progress bar over the minibatches (with the last epoch and its loss).
     :returns: per epoch the mean actor loss (``nll``), critic loss (``value_mse``) and, for
-        Gaussian policies, the mean absolute error of the mean action (``mae``).
+        Gaussian policies, the mean absolute error of the mean action (``mae``); with ``q_weight``
+        also the cost fit's mean squared error (``q_mse``, [(kJ/kg)^2]) and ``alpha`` at the end of
+        the epoch [kJ/kg per logit].
     """
     import torch
 
@@ -491,7 +567,19 @@ def pretrain(
     accepted = None if demos.accepted is None else torch.as_tensor(demos.accepted, dtype=torch.bool)
     if accepted is not None and (act.dtype.is_floating_point or accepted.shape[0] != len(act)):
         raise ConfigError(f"pretrain: accepted of shape {tuple(accepted.shape)} needs one row per discrete action")
-    opt = optimizer if optimizer is not None else torch.optim.Adam(policy.parameters(), lr=learning_rate)
+    if not 0.0 <= q_weight < math.inf:
+        raise ConfigError(f"pretrain: q_weight={q_weight!r} must be a finite number >= 0")
+    fit_q = q_weight > 0.0
+    params = list(policy.parameters())
+    if fit_q:
+        if demos.costs_to_go is None or act.dtype.is_floating_point or optimizer is not None:
+            raise ConfigError("pretrain: q_weight > 0 needs discrete actions, demos.costs_to_go and a fresh optimizer")
+        q_target = torch.as_tensor(demos.costs_to_go, dtype=torch.float32) / 1000.0  # kJ/kg
+        # alpha starts at 50 J/kg per logit: a few logits between a good successor and a poor one
+        log_alpha = torch.tensor(math.log(0.05), requires_grad=True)
+        beta = torch.tensor(float(q_target.mean()), requires_grad=True)
+        params += [log_alpha, beta]
+    opt = optimizer if optimizer is not None else torch.optim.Adam(params, lr=learning_rate)
     gen = np.random.default_rng(seed)
     n = len(demos)
     per_epoch = -(-n // batch_size)
@@ -503,14 +591,24 @@ def pretrain(
     policy.set_training_mode(True)
     for e in range(int(epochs)):
         order = gen.permutation(n)
-        sums = {"nll": 0.0, "value_mse": 0.0, "mae": 0.0}
+        sums = {"nll": 0.0, "value_mse": 0.0, "mae": 0.0, "q_mse": 0.0}
         for b, start in enumerate(range(0, n, batch_size)):
             if decay:  # linear from learning_rate at the first minibatch to the final fraction at the last
                 frac = (e * per_epoch + b) / max(total - 1, 1)
                 for g in opt.param_groups:
                     g["lr"] = learning_rate * (1.0 - (1.0 - final_fraction) * frac)
             idx = torch.as_tensor(order[start : start + batch_size])
-            if accepted is None:
+            raw = None
+            if fit_q:  # the raw logits, before Categorical normalises them
+                feats = policy.extract_features(obs[idx], policy.pi_features_extractor)
+                raw = policy.action_net(policy.mlp_extractor.forward_actor(feats))
+                values = policy.predict_values(obs[idx])
+                lp = torch.log_softmax(raw, dim=1)
+                if accepted is None:
+                    log_prob = lp.gather(1, act[idx].long()[:, None]).squeeze(1)
+                else:
+                    log_prob = torch.logsumexp(lp.masked_fill(~accepted[idx], -math.inf), dim=1)
+            elif accepted is None:
                 values, log_prob, _ = policy.evaluate_actions(obs[idx], act[idx])
             else:  # log of the accepted set's probability (Categorical's logits are log-probabilities)
                 values = policy.predict_values(obs[idx])
@@ -523,6 +621,12 @@ def pretrain(
                 wb = wts[idx]
                 nll, vloss = -(wb * log_prob).sum() / wb.sum(), (wb * sq).sum() / wb.sum()
             loss = nll + value_weight * vloss
+            if raw is not None:
+                q_hat = beta - torch.exp(log_alpha) * raw.gather(1, act[idx].long()[:, None]).squeeze(1)
+                qsq = (q_hat - q_target[idx]) ** 2
+                qloss = torch.mean(qsq) if wts is None else (wts[idx] * qsq).sum() / wts[idx].sum()
+                loss = loss + q_weight * qloss
+                sums["q_mse"] += float(qloss.detach()) * len(idx)
             opt.zero_grad()
             loss.backward()
             opt.step()
@@ -535,7 +639,15 @@ def pretrain(
                 with torch.no_grad():
                     mean = policy.get_distribution(obs[idx]).distribution.mean
                     sums["mae"] += float(torch.mean(torch.abs(mean - act[idx]))) * w
-        log.append({k: v / n for k, v in sums.items() if k != "mae" or act.dtype.is_floating_point})
+        log.append(
+            {
+                k: v / n
+                for k, v in sums.items()
+                if (k != "mae" or act.dtype.is_floating_point) and (k != "q_mse" or fit_q)
+            }
+        )
+        if fit_q:
+            log[-1]["alpha"] = float(torch.exp(log_alpha).detach())
         if bar is not None:
             bar.set_postfix(epoch=f"{e + 1}/{epochs}", nll=f"{log[-1]['nll']:.3f}")
     if bar is not None:
@@ -551,6 +663,7 @@ __all__ = [
     "demonstrations",
     "pretrain",
     "rows",
+    "sampled_episodes",
     "visited_prefixes",
     "visited_starts",
     "with_mirror_images",

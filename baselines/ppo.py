@@ -137,6 +137,11 @@ class TrainConfig:
         within 50 m, height within 10 m, edge cost within 20 J/kg:
         :func:`baselines.scoring.near_equivalent`), and the cloning fits the set's summed
         probability, so the policy need not learn the search's tie-breaks. Default off.
+    :param demo_q_weight: discrete policies with ``demos``: weight of the cloning's cost fit
+        (:func:`baselines.imitation.pretrain`'s ``q_weight``): the demonstrated primitive's logit,
+        read as ``beta - alpha * logit`` [kJ/kg], is fitted to the plan's cost from that state on
+        (edge costs plus the search's time weight times the time left), beside the cross-entropy.
+        0 (default): off.
     :param log_std_init: initial log standard deviation of the continuous policy.
     :param shaping: weight of this module's extra potential-based shaping (Ng et al. 1999),
         ``shaping * (gamma * phi(s') - phi(s))`` with ``phi = -d_goal / 1 km``; 0 (default) leaves
@@ -222,6 +227,7 @@ class TrainConfig:
     scorer_estimate: bool = False
     scorer_lift: bool = False
     demo_equivalents: bool = False
+    demo_q_weight: float = 0.0
     log_std_init: float = -0.5
     shaping: float = 0.0
     body_frame: bool | None = None
@@ -322,6 +328,12 @@ class TrainConfig:
             raise ValueError("demo_rehearsal needs demos")
         if self.demo_equivalents and self.demos is None:
             raise ValueError("demo_equivalents=True needs demos")
+        qw = self.demo_q_weight
+        if isinstance(qw, bool) or not isinstance(qw, (int, float)) or not 0.0 <= qw < math.inf:
+            raise ValueError(f"demo_q_weight={qw!r} must be a finite number >= 0")
+        object.__setattr__(self, "demo_q_weight", float(qw))
+        if qw > 0.0 and (self.demos is None or self.algo in CONTINUOUS_ALGOS):
+            raise ValueError(f"demo_q_weight={qw!r} needs demos and a discrete algo (got algo={self.algo!r})")
         f = self.demo_starts
         if isinstance(f, bool) or not isinstance(f, (int, float)) or not 0.0 <= f <= 1.0:
             raise ValueError(f"demo_starts={f!r} must be a number in [0, 1]")
@@ -1223,6 +1235,7 @@ def _clone_demos(model: Any, config: TrainConfig, out: Path) -> tuple[dict[str, 
             learning_rate=config.demo_learning_rate,
             final_fraction=float(config.demo_lr_final_fraction),
             batch_size=int(config.demo_batch_size),
+            q_weight=float(config.demo_q_weight),
             seed=config.seed,
             progress=bool(config.progress_bar),
         )
@@ -1236,7 +1249,12 @@ def _clone_demos(model: Any, config: TrainConfig, out: Path) -> tuple[dict[str, 
         f"[{config.algo}] behaviour cloning: {len(demos)} steps of {len(plans.scenarios)} reference plans"
         f"{' and their mirror images' if mirrored else ''}, "
         f"{config.demo_epochs} epochs in {time.perf_counter() - t0:.0f} s"
-        + (f"; loss {losses[0]['nll']:.3f} -> {losses[-1]['nll']:.3f}" if losses else " (kept for rehearsal)"),
+        + (f"; loss {losses[0]['nll']:.3f} -> {losses[-1]['nll']:.3f}" if losses else " (kept for rehearsal)")
+        + (
+            f"; cost fit {losses[0]['q_mse']:.4f} -> {losses[-1]['q_mse']:.4f} (kJ/kg)^2"
+            if losses and "q_mse" in losses[0]
+            else ""
+        ),
         flush=True,
     )
     return {

@@ -27,7 +27,7 @@ from baselines.ppo import (
     train,
     turn_curve,
 )
-from baselines.reference import ReferenceConfig, compute_reference, load_reference, save_reference
+from baselines.reference import ReferenceConfig, compute_reference, load_reference, load_references, save_reference
 from baselines.reference.tasks import XC_DEMO_MIN_HEIGHT, XC_DEMO_TIME_WEIGHT
 from soaring_env._validation import ConfigError
 from soaring_env.env.config import MAX_EPISODE_STEPS
@@ -205,6 +205,21 @@ def test_weighted_cloning_fits_the_weighted_mean_of_conflicting_labels() -> None
         env.close()
 
 
+def _two_rows(first: np.ndarray, second: np.ndarray, action: int) -> Any:
+    """Two demonstration rows (plans "a" and "b", weight 1) labelled with the same primitive."""
+    from baselines.imitation import Demonstrations
+
+    return Demonstrations(
+        observations=np.stack([first, second]).astype(np.float32),
+        actions=np.array([action, action], np.int64),
+        returns=np.zeros(2, np.float32),
+        episode=np.array([0, 1]),
+        scenarios=("a", "b"),
+        plan_costs=(0.0, 0.0),
+        weights=np.ones(2, np.float32),
+    )
+
+
 def test_set_labels_fit_the_probability_of_the_set() -> None:
     """``accepted`` labels: one observation whose label accepts primitives {3, 40} is fitted until
     the two together hold nearly all the probability (either alone need not); a label that accepts
@@ -218,15 +233,7 @@ def test_set_labels_fit_the_probability_of_the_set() -> None:
     env = _env(DISCRETE_ID)(SCENARIOS[0])
     obs, _ = env.reset(seed=0)
     n = int(env.action_space.n)
-    base = Demonstrations(
-        observations=np.stack([obs, obs]).astype(np.float32),
-        actions=np.array([3, 3], np.int64),
-        returns=np.zeros(2, np.float32),
-        episode=np.array([0, 1]),
-        scenarios=("a", "b"),
-        plan_costs=(0.0, 0.0),
-        weights=np.ones(2, np.float32),
-    )
+    base = _two_rows(obs, obs, 3)
     acc = np.zeros((2, n), bool)
     acc[:, [3, 40]] = True
 
@@ -252,6 +259,91 @@ def test_set_labels_fit_the_probability_of_the_set() -> None:
     with pytest.raises(ConfigError, match="accepted"):
         fit(dataclasses.replace(base, accepted=acc[:1]), 1)
     env.close()
+
+
+def test_costs_to_go_are_the_plans_objective_from_each_row(ref_dir: Path, tmp_path: Path) -> None:
+    """Closed form: a plan's first row costs its plan cost plus the search's time weight times its
+    flight time (the env's, whole steps); a DAgger plan (``demo_from`` 1) starts a step later, one
+    edge and 30 s cheaper; each later row is cheaper by the edge its predecessor flew and the time
+    weight times 30 s; the mirror images and a selection of rows keep the values."""
+    from baselines.imitation import rows, with_mirror_images
+
+    name = SCENARIOS[0].name
+    ref = json.loads((ref_dir / f"{name}.json").read_text())
+    plan = ref["samplers"]["primitive"]
+    ref["samplers"] = {"primitive": {**plan, "settings": {**plan["settings"], "time_weight": 2.0}}}
+    (tmp_path / f"{name}.json").write_text(json.dumps(ref))
+    ref["scenario"]["name"] = f"{name}-x"
+    ref["samplers"]["primitive"]["demo_from"] = 1
+    (tmp_path / f"{name}-x.json").write_text(json.dumps(ref))
+    d = demonstrations(tmp_path, _env(DISCRETE_ID), sampler="primitive", gamma=1.0)
+    assert d.costs_to_go is not None and d.costs_to_go.dtype == np.float32
+    env = _env(DISCRETE_ID)(SCENARIOS[0])
+    env.reset(seed=0)
+    edges = []
+    for a in plan["actions"]:
+        info = env.step(int(a))[4]
+        edges.append((info["edge_cost"], info["time"]))
+    env.close()
+    n = len(plan["actions"])
+    full, late = d.costs_to_go[:n], d.costs_to_go[n:]
+    assert d.scenarios == (name, f"{name}-x") and len(late) == n - 1
+    # the env's clock: whole steps (the plan's flight_time stops where the last edge enters the goal)
+    assert math.isclose(full[0], plan["best_cost"] + 2.0 * edges[-1][1], rel_tol=1e-6, abs_tol=1e-3)
+    starts = [0.0] + [t for _, t in edges[:-1]]
+    steps = np.array([c + 2.0 * (t - t0) for (c, t), t0 in zip(edges, starts, strict=True)])
+    assert np.allclose(full[:-1] - full[1:], steps[:-1], rtol=1e-5, atol=1e-3)
+    assert np.allclose(late, full[1:]) and math.isclose(full[-1], steps[-1], rel_tol=1e-6, abs_tol=1e-3)
+    both = with_mirror_images(d, np.ones(d.observations.shape[1], np.float32), lambda a: a)
+    assert both.costs_to_go is not None and np.array_equal(both.costs_to_go, np.tile(d.costs_to_go, 2))
+    assert np.array_equal(rows(d, np.array([2, 0])).costs_to_go, d.costs_to_go[[2, 0]])
+
+
+def test_cost_fit_reads_the_logits_as_costs_and_bad_settings_are_refused() -> None:
+    """Two observations labelled with the same primitive but costs of 1 and 3 kJ/kg from there:
+    with ``q_weight`` the cost read from the demonstrated logit, beta - alpha * logit, is fitted to
+    both (the cross-entropy alone leaves them free), the primitive stays the policy's choice, and
+    ``q_weight`` 0 gives the plain cloning bit for bit. Refused: a negative, NaN or infinite
+    weight, rows without costs, continuous actions, a given optimizer, and the config's bad values."""
+    import torch
+    from stable_baselines3 import PPO
+
+    from baselines.imitation import Demonstrations
+
+    env = _env(DISCRETE_ID)(SCENARIOS[0])
+    obs, _ = env.reset(seed=0)
+    far, _ = env.reset(seed=1, options={"scenario": SCENARIOS[1]})
+    demos = dataclasses.replace(_two_rows(obs, far, 3), costs_to_go=np.array([1000.0, 3000.0], np.float32))
+
+    def fit(q_weight: float, epochs: int, d: Demonstrations = demos) -> tuple[list[dict[str, float]], Any]:
+        torch.manual_seed(0)
+        model = PPO("MlpPolicy", env, seed=0, device="cpu", policy_kwargs={"net_arch": [16]})
+        log = pretrain(model.policy, d, epochs=epochs, learning_rate=1e-2, batch_size=2, q_weight=q_weight, seed=0)
+        return log, model.policy
+
+    log, policy = fit(10.0, 400)
+    assert log[0]["q_mse"] > 0.5 and log[-1]["q_mse"] < 1e-3 and log[-1]["alpha"] > 0.0
+    with torch.no_grad():
+        raw = policy.action_net(policy.mlp_extractor.forward_actor(torch.as_tensor(demos.observations)))
+    assert raw.argmax(dim=1).tolist() == [3, 3]
+    assert raw[1, 3] < raw[0, 3]  # the costlier state has the smaller logit: alpha > 0
+    plain = fit(0.0, 5)[0]
+    assert plain == fit(0.0, 5, dataclasses.replace(demos, costs_to_go=None))[0]
+    assert "q_mse" not in plain[-1] and "alpha" not in plain[-1]
+    for bad in (-1.0, math.nan, math.inf):
+        with pytest.raises(ConfigError, match="q_weight"):
+            fit(bad, 1)
+    with pytest.raises(ConfigError, match="costs_to_go"):
+        fit(1.0, 1, dataclasses.replace(demos, costs_to_go=None))
+    with pytest.raises(ConfigError, match="fresh optimizer"):
+        pretrain(policy, demos, epochs=1, q_weight=1.0, optimizer=torch.optim.Adam(policy.parameters()))
+    env.close()
+    for bad in (-1, math.nan, math.inf, "10", True):
+        with pytest.raises(ValueError, match="demo_q_weight"):
+            TrainConfig(algo="discrete", demos=".", demo_q_weight=bad)  # type: ignore[arg-type]
+    for algo, demos_dir in (("continuous", "."), ("discrete", None)):
+        with pytest.raises(ValueError, match=r"demo_q_weight=1\.0 needs demos and a discrete algo"):
+            TrainConfig(algo=algo, demos=demos_dir, demo_q_weight=1.0)
 
 
 def test_cloning_step_size_falls_linearly_and_bad_settings_are_refused(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -322,6 +414,7 @@ def _tiny_run(algo: str, ref_dir: Path, **kwargs: object) -> TrainConfig:
         ("discrete", {}),
         ("discrete", {"policy": "scoring", "scorer_hidden": (8,)}),
         ("discrete", {"policy": "successor", "scorer_hidden": (8,)}),
+        ("discrete", {"policy": "successor", "scorer_hidden": (8,), "demo_q_weight": 10.0}),
         ("masked", {}),
         ("grid", {"final_glide": True}),
     ],
@@ -337,6 +430,7 @@ def test_train_with_demos_primitives_and_final_glide(
     record = json.loads((out / "config.json").read_text())
     bc = record["behaviour_cloning"]
     assert bc["plans"] == len(SCENARIOS) and bc["mirrored"] and bc["steps"] % 2 == 0
+    assert ("q_mse" in bc["last_epoch"]) == ("demo_q_weight" in kwargs)
     agent = PPOAgent(out)
     env = gym.make(record["env_id"])
     obs, _ = env.reset(seed=0)
@@ -594,6 +688,85 @@ def test_demos_cli_plans_resumes_and_runs_a_dagger_round(
         with pytest.raises(SystemExit) as exc:
             main([*bad, *common])
         assert exc.value.code == 2 and field in capsys.readouterr().err
+
+
+def test_sampled_episodes_draw_from_the_tempered_softmax() -> None:
+    """Closed form: a policy whose logits put 0.5 / 0.3 / 0.2 on three primitives starts its sampled
+    episodes with them at those rates (temperature 1) and at p^2 / sum p^2 (temperature 0.5); its
+    greedy episode flies the first alone; the same seed gives the same episodes; bad settings are
+    refused."""
+    from baselines.imitation import sampled_episodes
+
+    env = _env(DISCRETE_ID)(SCENARIOS[0])
+    p = np.array([0.5, 0.3, 0.2])
+    z = np.full(int(env.action_space.n), -np.inf)
+    z[[7, 20, 33]] = np.log(p)
+    for temperature, want in ((1.0, p), (0.5, p**2 / np.sum(p**2))):
+        eps = sampled_episodes(env, lambda _obs: z, SCENARIOS[0], samples=600, temperature=temperature, seed=3)
+        assert set(eps[0]["actions"]) == {7} and len(eps) == 601
+        first = np.array([e["actions"][0] for e in eps[1:]])
+        freq = np.array([np.mean(first == a) for a in (7, 20, 33)])
+        assert np.allclose(freq, want, atol=0.06), (temperature, freq)
+        assert all(set(e["actions"]) <= {7, 20, 33} and isinstance(e["success"], bool) for e in eps)
+    again = sampled_episodes(env, lambda _obs: z, SCENARIOS[0], samples=5, temperature=1.0, seed=3)
+    assert again == sampled_episodes(env, lambda _obs: z, SCENARIOS[0], samples=5, temperature=1.0, seed=3)
+    for bad in ({"samples": 0}, {"temperature": 0.0}, {"temperature": math.nan}):
+        with pytest.raises(ConfigError):
+            sampled_episodes(env, lambda _obs: z, SCENARIOS[0], **{"samples": 2, "temperature": 1.0, "seed": 0, **bad})
+    env.close()
+
+
+def test_demos_cli_self_imitation_keeps_better_sampled_episodes_and_resumes(
+    ref_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--self-imitate``: a kept plan is a sampled episode that beats the mode by the margin and
+    replays to its cost; the log records every scenario; a rerun resumes; bad options are refused.
+    The policy is a published clone (README round eleven's ``m3-s0``): a tiny one reaches no goal."""
+    from baselines.cli.demos import main
+
+    run = Path(__file__).resolve().parents[1] / "results" / "ppo-score" / "m3-s0" / "discrete"
+    out = tmp_path / "self"
+    common = ["--scenarios", "3", "--first", "5", "--samples", "6", "--tag", "x1", "--no-progress", "--out", str(out)]
+    assert main(["--self-imitate", str(run), *common]) == 0
+    log_path = out / "self-imitation" / "x1-20005+3.json"
+    assert set(load_references(out)) == {
+        f"{n}-x1s0" for n, r in json.loads(log_path.read_text())["scenarios"].items() if r["kept"]
+    }
+    log = json.loads(log_path.read_text())
+    assert sorted(log["scenarios"]) == [f"random-{20005 + k}" for k in range(3)]
+    assert any(row["kept"] for row in log["scenarios"].values())  # deterministic: the seeds fix the draws
+    for name, row in log["scenarios"].items():
+        path = out / f"{name}-x1s0.json"
+        assert path.is_file() == row["kept"]
+        if row["kept"]:
+            assert row["greedy"] is None or row["best_sampled"] <= row["greedy"] - 20.0
+            plan = load_reference(path).samplers["primitive"]
+            env = gym.make(DISCRETE_ID, scenario=get_scenario(name))
+            env.reset(seed=0)
+            for a in plan.actions:
+                info = env.step(int(a))[4]
+            assert info["is_success"] and info["energy_spent"] == plan.best_cost
+            env.close()
+    stamp = log_path.stat().st_mtime_ns
+    assert main(["--self-imitate", str(run), *common]) == 0 and log_path.stat().st_mtime_ns == stamp
+    assert "0 of 3 scenarios to fly" in capsys.readouterr().out
+    for bad, field in (
+        (["--samples", "0"], "--samples"),
+        (["--temperature", "0"], "--temperature"),
+        (["--margin", "nan"], "--margin"),
+        (["--dagger", str(run)], "--self-imitate"),
+        (["--task", "xc"], "--self-imitate"),
+    ):
+        with pytest.raises(SystemExit) as exc:
+            main(["--self-imitate", str(run), *common, *bad])
+        assert exc.value.code == 2 and field in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        main(["--self-imitate", str(run), *common, "--samples", "7"])  # the log holds other settings
+    assert exc.value.code == 2 and "other settings" in capsys.readouterr().err
+    grid = train(_tiny_run("grid", ref_dir, demo_epochs=1), tmp_path / "grid")
+    with pytest.raises(SystemExit) as exc:
+        main(["--self-imitate", str(grid), *common[:-1], str(tmp_path / "g")])
+    assert exc.value.code == 2 and "discrete goal run" in capsys.readouterr().err
 
 
 def test_rehearsal_without_a_cloning_pass(ref_dir: Path, tmp_path: Path) -> None:
@@ -974,6 +1147,12 @@ def test_diagnose_clone_fit_and_ensemble(
         empty = tmp_path / "no-plans"
         empty.mkdir()
         dc.ensemble_report([str(out)], "tiny", lead=1, plans_dir=empty)
+    # sampled: the mode's episode is the ensemble's; the best sampled one is at least as cheap
+    best = dc.sampled_report(str(out), "tiny", 4, 1.0)
+    for row, mode, one in zip(best["episodes"], best["greedy"], ens["episodes"], strict=True):
+        assert mode["energy_spent"] == one["energy_spent"] and mode["regret"] == one["regret"]
+        assert row["success"] and row["energy_spent"] <= mode["energy_spent"]
+    assert best == dc.sampled_report(str(out), "tiny", 4, 1.0)  # seeded
     obs, _ = env.reset(seed=0, options={"scenario": SCENARIOS[0]})
     agent.reset(env, 0)
     assert int(np.argmax(agent.logits(obs))) == int(agent.predict(obs)[0])  # the policy's mode
@@ -986,6 +1165,9 @@ def test_diagnose_clone_fit_and_ensemble(
         (["fit", "--runs", str(out), "--match", "("], "not a regular expression"),
         (["ensemble", "--runs", str(out), "--lead", "-1"], "--lead"),
         (["ensemble", "--runs", str(out), "--repeat-bonus", "nan"], "--repeat-bonus"),
+        (["sampled", "--runs", str(out), str(out)], "one run"),
+        (["sampled", "--runs", str(out), "--temperature", "0"], "--temperature"),
+        (["sampled", "--runs", str(out), "--samples", "0"], "--samples"),
     ):
         with pytest.raises(SystemExit):
             dc.main(argv)

@@ -13,6 +13,9 @@ the states a trained policy visits.
     python scripts/demos.py --task xc --scenarios 200 --out results/reference-train-xc
     # goal reaching with a time weight [J/kg per s]: the goal env's own search (DAgger keeps prefixes)
     python scripts/demos.py --scenarios 200 --time-weight 1 --out results/reference-train-goal-t1
+    # self-imitation: a discrete run's own best of 8 sampled episodes where it beats its mode by 20 J/kg
+    python scripts/demos.py --scenarios 200 --first 2000 --self-imitate results/ppo-score/m3-s0 --samples 8 \
+        --tag x1 --out results/reference-train-prim-t1
     # goal reaching at Ts = 10 s on the physical envelope: the goal env's own search in that env
     python scripts/demos.py --scenarios 600 --out results/reference-train-ts10 \
         --env-kwargs '{"duration": 10, "envelope": "physical", "n_points": 10, "max_steps": 120, "time_limit": 1200}'
@@ -88,6 +91,20 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument("--tag", default="", help="with --dagger: marks the round in the names (<name>-<tag>s<k>)")
     p.add_argument(
+        "--self-imitate",
+        default=None,
+        metavar="RUN",
+        help="no search: fly this discrete run's policy (its mode, and --samples draws) and keep its best "
+        "sampled episode where that beats the mode by --margin: a plan the policy can fly (<name>-<tag>s0)",
+    )
+    p.add_argument("--samples", type=int, default=8, help="with --self-imitate: sampled episodes (default 8)")
+    p.add_argument(
+        "--temperature", type=float, default=1.0, help="with --self-imitate: of the sampled logits (default 1)"
+    )
+    p.add_argument(
+        "--margin", type=float, default=20.0, help="with --self-imitate: least gain over the mode [J/kg] (20)"
+    )
+    p.add_argument(
         "--env-kwargs",
         default=None,
         metavar="JSON",
@@ -105,6 +122,17 @@ def main(argv: list[str] | None = None) -> int:
     if not args.tag.isalnum() and args.tag != "":
         p.error(f"--tag={args.tag!r}: letters and digits only")
     env_kwargs = _env_kwargs(p, args.env_kwargs)
+    if args.self_imitate is not None:
+        if args.dagger is not None or args.task != "goal" or env_kwargs:
+            p.error("--self-imitate goes with goal reaching alone (no --dagger, --task xc or --env-kwargs)")
+        if not (0.0 < args.temperature < float("inf")) or not (0.0 <= args.margin < float("inf")):
+            p.error(f"--temperature={args.temperature} must be > 0 and --margin={args.margin} >= 0 (finite)")
+        if args.samples < 1:
+            p.error(f"--samples={args.samples} must be >= 1")
+        try:
+            return _self_imitation(args)
+        except (ConfigError, FileNotFoundError) as exc:
+            p.error(f"--self-imitate={args.self_imitate!r}: {exc}")
     try:
         task_id, family, tw, floor = DEMO_TASKS[args.task]
         tw = tw if args.time_weight is None else args.time_weight
@@ -218,6 +246,94 @@ def _dagger_starts(args: argparse.Namespace, scenarios: list, task: bool) -> tup
         starts, prefixes = visited_starts(scenarios, make, act, **visits), {}
     print(f"dagger: {len(starts)} states visited by {agent.model_path} on {len(scenarios)} scenarios", flush=True)
     return starts, prefixes
+
+
+def _self_imitation(args: argparse.Namespace) -> int:
+    """``--self-imitate``: per scenario the run's greedy episode and ``--samples`` sampled ones
+    (:func:`baselines.imitation.sampled_episodes`, seeded by the scenario's seed); the best
+    sampled episode that reaches the goal becomes a plan file ``<name>-<tag>s0.json`` where it
+    spends at least ``--margin`` J/kg less than the greedy one. Every scenario's outcome goes to
+    ``self-imitation/<tag>-<first seed>+<count>.json`` in ``--out`` (atomically, after each
+    scenario), which the same command resumes from."""
+    import dataclasses
+    import math
+
+    from baselines._runs import progress_bar
+    from baselines.agents import PPOAgent
+    from baselines.evaluation import make_env, ppo_env_kwargs, ppo_model_path
+    from baselines.imitation import sampled_episodes
+    from baselines.reference import SamplerReference, ScenarioReference, save_reference
+
+    agent = PPOAgent(ppo_model_path(args.self_imitate, args.ppo_model))
+    if agent.algo != "discrete" or agent.env_id != "soaring/Soaring-v0":
+        raise ConfigError(f"a run of {agent.env_id} ({agent.algo}); self-imitation needs a discrete goal run")
+    env = make_env(agent.env_id, ppo_env_kwargs(agent.config))
+    agent.reset(env)
+    args.out.mkdir(parents=True, exist_ok=True)
+    # one log per command (tag and scenario range), so that two commands side by side lose nothing;
+    # in a subfolder, since every JSON file of --out is read as a plan
+    log_path = args.out / "self-imitation" / f"{args.tag}-{DEMO_SEED0 + args.first}+{args.scenarios}.json"
+    log_path.parent.mkdir(exist_ok=True)
+    settings = {
+        "self_imitate": str(agent.model_path),
+        "samples": args.samples,
+        "temperature": args.temperature,
+        "margin": args.margin,
+        "time_weight": 0.0,  # chosen by energy alone
+    }
+    log = read_json(log_path, "self-imitation log") if log_path.exists() else {"settings": settings, "scenarios": {}}
+    if log.get("settings") != settings:
+        raise ConfigError(f"{log_path} was written with other settings: {log.get('settings')}")
+    names = [f"random-{DEMO_SEED0 + args.first + k}" for k in range(args.scenarios)]
+    todo = [n for n in names if n not in log["scenarios"]]
+    print(f"self-imitation: {len(todo)} of {len(names)} scenarios to fly, {args.samples} samples each", flush=True)
+    bar = progress_bar(len(todo), 0, not args.no_progress, "self-imitation", "scenario")
+    t0 = time.perf_counter()
+    for name in todo:
+        sc = get_scenario(name)
+        t1 = time.perf_counter()
+        greedy, *drawn = sampled_episodes(
+            env, agent.logits, sc, samples=args.samples, temperature=args.temperature, seed=int(name.split("-")[1])
+        )
+        reached = [e for e in drawn if e["success"]]
+        best = min(reached, key=lambda e: e["energy_spent"]) if reached else None
+        greedy_cost = greedy["energy_spent"] if greedy["success"] else math.inf
+        kept = best is not None and best["energy_spent"] <= greedy_cost - args.margin
+        if kept and best is not None:
+            plan = SamplerReference(
+                best_cost=best["energy_spent"],
+                direct_cost=math.nan,
+                actions=best["actions"],
+                direct_actions=[],
+                flight_time=best["flight_time"],
+                settings={**settings, "greedy_cost": greedy["energy_spent"] if greedy["success"] else None},
+                rollouts=0,
+                seconds=round(time.perf_counter() - t1, 3),
+            )
+            copy = dataclasses.replace(sc, name=f"{name}-{args.tag}s0")
+            save_reference(ScenarioReference(copy, math.nan, {"primitive": plan}), args.out / f"{copy.name}.json")
+        log["scenarios"][name] = {
+            "greedy": greedy["energy_spent"] if greedy["success"] else None,
+            "best_sampled": best["energy_spent"] if best is not None else None,
+            "reached": len(reached),
+            "kept": kept,
+        }
+        atomic_write_text(log_path, json.dumps(log, indent=1) + "\n")
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
+    env.close()
+    rows = [log["scenarios"][n] for n in names]
+    kept_rows = [r for r in rows if r["kept"]]
+    gain = sum(r["greedy"] - r["best_sampled"] for r in kept_rows if r["greedy"] is not None)
+    print(
+        f"{len(kept_rows)} of {len(rows)} scenarios kept (best sampled episode beats the mode by >= "
+        f"{args.margin:g} J/kg; {gain / max(len(kept_rows), 1):.0f} J/kg on average where the mode reached the goal) "
+        f"in {time.perf_counter() - t0:.0f} s -> {args.out} ({log_path.name})",
+        flush=True,
+    )
+    return 0
 
 
 if __name__ == "__main__":

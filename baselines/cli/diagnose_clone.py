@@ -25,6 +25,10 @@ Four measurements for the successor policies of ``scripts/train_ppo.py --algo di
   first N steps flown by the demonstrator's plans (a ``demonstrator`` run's ``plans`` folder), the
   policy taking over from there (README, round eleven: where in the flight the clones lose);
   ``--repeat-bonus B``: the primitive flown last gets B added to its logit (round twelve).
+* ``sampled`` (round thirteen): what lies within one run's reach: per scenario its mode's episode
+  and ``--samples`` episodes drawn from its logits (``--temperature``,
+  :func:`baselines.imitation.sampled_episodes`), the best of them by energy scored. Not an agent
+  (it picks with the simulator): the headroom ``scripts/demos.py --self-imitate`` clones from.
 
 Scenario sets (``--on``): ``val`` = ``random-5000 ... 5019`` against ``results/reference-val``
 (narrow primitive references, made for this round), ``h21`` = ``paper`` + ``random-10000 ...
@@ -37,6 +41,7 @@ Usage::
     python scripts/diagnose_clone.py demonstrator --on val --out results/ppo-score/round10/demonstrator
     python scripts/diagnose_clone.py consistency --samples 60 --out results/ppo-score/round11/consistency
     python scripts/diagnose_clone.py ensemble --runs results/ppo-score/s2 results/ppo-score/s3 --on h100
+    python scripts/diagnose_clone.py sampled --runs results/ppo-score/m3-s0 --samples 32 --on val
 """
 
 from __future__ import annotations
@@ -347,6 +352,46 @@ def ensemble_report(
     }
 
 
+def sampled_report(run: str, on: str, samples: int, temperature: float) -> dict[str, Any]:
+    """The ``sampled`` measurement: per scenario of ``on`` the best (least energy, reaching the goal)
+    of one run's mode and ``samples`` episodes drawn from its logits, seeded by the scenario's
+    position in the set; ``episodes`` holds the best, ``greedy`` the mode's."""
+    from baselines.agents import PPOAgent
+    from baselines.evaluation import episode_regret, make_env, ppo_env_kwargs, resolve_scenario
+    from baselines.imitation import sampled_episodes
+    from baselines.reference import load_references
+
+    names, ref_dir = SETS[on]
+    refs = load_references(ref_dir)
+    agent = PPOAgent(_run_dir(run) / "model.zip")
+    env = make_env(agent.env_id, ppo_env_kwargs(agent.config))
+    agent.reset(env)
+
+    def row(name: str, ep: dict[str, Any] | None) -> dict[str, Any]:
+        if ep is None:  # no episode reached the goal
+            return {"scenario": name, "success": False, "energy_spent": None, "regret": None}
+        rec = {"scenario": name, "success": ep["success"], "energy_spent": ep["energy_spent"], "env_id": agent.env_id}
+        return {**rec, "regret": episode_regret(rec, refs)}
+
+    best_rows, greedy_rows = [], []
+    for k, name in enumerate(names):
+        eps = sampled_episodes(
+            env, agent.logits, resolve_scenario(name, {}), samples=samples, temperature=temperature, seed=k
+        )
+        reached = [e for e in eps if e["success"]]
+        best_rows.append(row(name, min(reached, key=lambda e: e["energy_spent"]) if reached else None))
+        greedy_rows.append(row(name, eps[0]))
+    env.close()
+    return {
+        "on": on,
+        "run": str(_run_dir(run)),
+        "samples": samples,
+        "temperature": temperature,
+        "episodes": best_rows,
+        "greedy": greedy_rows,
+    }
+
+
 def regret_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
     """Median and mean regret over the successful episodes with a regret, the count <= 0.6, failures."""
     r = np.array([x["regret"] for x in rows if x["success"] and x["regret"] is not None], float)
@@ -364,7 +409,7 @@ def regret_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point; returns the exit status."""
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("mode", choices=("fit", "demonstrator", "consistency", "ensemble"))
+    p.add_argument("mode", choices=("fit", "demonstrator", "consistency", "ensemble", "sampled"))
     p.add_argument("--runs", nargs="+", default=[], help="successor-policy runs (fit: each; ensemble: together)")
     p.add_argument("--demos", default="results/reference-train-prim-t1", help="fit: the demonstrations' folder")
     p.add_argument(
@@ -373,7 +418,8 @@ def main(argv: list[str] | None = None) -> int:
         help="fit, consistency: only the scenario names matching this regular expression (consistency: "
         "default the base plans, random-20\\d\\d\\d)",
     )
-    p.add_argument("--samples", type=int, default=60, help="consistency: states to plan again from")
+    p.add_argument("--samples", type=int, default=60, help="consistency: states to plan again from; sampled: episodes")
+    p.add_argument("--temperature", type=float, default=1.0, help="sampled: of the logits (default 1)")
     p.add_argument("--lead", type=int, default=0, help="ensemble: the first N steps from the demonstrator's plans")
     p.add_argument("--plans", default=None, help="ensemble with --lead: a demonstrator run's plans folder")
     p.add_argument(
@@ -399,6 +445,8 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"{args.mode} needs --runs")
     if searches and (args.out is None or not 0.0 <= args.time_weight < float("inf")):
         p.error(f"{args.mode} needs --out (a folder) and a --time-weight >= 0")
+    if args.mode == "sampled" and (len(args.runs) != 1 or not 0.0 < args.temperature < float("inf")):
+        p.error(f"sampled needs one run (got {len(args.runs)}) and a --temperature > 0 (got {args.temperature})")
     if searches:
         check_cli_args(p, args, dirs=("out",))
     elif args.out is not None and args.out.is_dir():
@@ -441,6 +489,10 @@ def main(argv: list[str] | None = None) -> int:
                 f"{c['cheaper_by_more_than_5']}, dearer at {c['dearer_by_more_than_5']}; another primitive "
                 f"within 5 J/kg at {c['other_primitive_within_5']}"
             )
+        elif args.mode == "sampled":
+            res = sampled_report(args.runs[0], args.on, args.samples, args.temperature)
+            g = regret_summary(res["greedy"])
+            print(f"the mode alone on {args.on}: regret median {g['median']:.3f}, {g['at_most_0.6']} at most 0.6")
         else:
             res = ensemble_report(args.runs, args.on, args.lead, args.plans, args.repeat_bonus)
     except ConfigError as exc:
