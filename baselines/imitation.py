@@ -509,6 +509,12 @@ def sampled_episodes(
     return out
 
 
+def best_reached(episodes: Sequence[dict[str, Any]]) -> dict[str, Any] | None:
+    """The episode of :func:`sampled_episodes` that reaches the goal with the least energy (None: none does)."""
+    reached = [e for e in episodes if e["success"]]
+    return min(reached, key=lambda e: e["energy_spent"]) if reached else None
+
+
 def pretrain(
     policy: Any,
     demos: Demonstrations,
@@ -567,7 +573,7 @@ def pretrain(
     accepted = None if demos.accepted is None else torch.as_tensor(demos.accepted, dtype=torch.bool)
     if accepted is not None and (act.dtype.is_floating_point or accepted.shape[0] != len(act)):
         raise ConfigError(f"pretrain: accepted of shape {tuple(accepted.shape)} needs one row per discrete action")
-    if not 0.0 <= q_weight < math.inf:
+    if isinstance(q_weight, bool) or not isinstance(q_weight, (int, float)) or not 0.0 <= q_weight < math.inf:
         raise ConfigError(f"pretrain: q_weight={q_weight!r} must be a finite number >= 0")
     fit_q = q_weight > 0.0
     params = list(policy.parameters())
@@ -659,6 +665,7 @@ def pretrain(
 __all__ = [
     "DEMO_SEED0",
     "Demonstrations",
+    "best_reached",
     "demo_reference_config",
     "demonstrations",
     "pretrain",

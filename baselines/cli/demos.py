@@ -261,7 +261,7 @@ def _self_imitation(args: argparse.Namespace) -> int:
     from baselines._runs import progress_bar
     from baselines.agents import PPOAgent
     from baselines.evaluation import make_env, ppo_env_kwargs, ppo_model_path
-    from baselines.imitation import sampled_episodes
+    from baselines.imitation import best_reached, sampled_episodes
     from baselines.reference import SamplerReference, ScenarioReference, save_reference
 
     agent = PPOAgent(ppo_model_path(args.self_imitate, args.ppo_model))
@@ -295,8 +295,7 @@ def _self_imitation(args: argparse.Namespace) -> int:
         greedy, *drawn = sampled_episodes(
             env, agent.logits, sc, samples=args.samples, temperature=args.temperature, seed=int(name.split("-")[1])
         )
-        reached = [e for e in drawn if e["success"]]
-        best = min(reached, key=lambda e: e["energy_spent"]) if reached else None
+        best = best_reached(drawn)
         greedy_cost = greedy["energy_spent"] if greedy["success"] else math.inf
         kept = best is not None and best["energy_spent"] <= greedy_cost - args.margin
         if kept and best is not None:
@@ -315,7 +314,7 @@ def _self_imitation(args: argparse.Namespace) -> int:
         log["scenarios"][name] = {
             "greedy": greedy["energy_spent"] if greedy["success"] else None,
             "best_sampled": best["energy_spent"] if best is not None else None,
-            "reached": len(reached),
+            "reached": sum(e["success"] for e in drawn),
             "kept": kept,
         }
         atomic_write_text(log_path, json.dumps(log, indent=1) + "\n")

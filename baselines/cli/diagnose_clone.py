@@ -358,7 +358,7 @@ def sampled_report(run: str, on: str, samples: int, temperature: float) -> dict[
     position in the set; ``episodes`` holds the best, ``greedy`` the mode's."""
     from baselines.agents import PPOAgent
     from baselines.evaluation import episode_regret, make_env, ppo_env_kwargs, resolve_scenario
-    from baselines.imitation import sampled_episodes
+    from baselines.imitation import best_reached, sampled_episodes
     from baselines.reference import load_references
 
     names, ref_dir = SETS[on]
@@ -378,8 +378,7 @@ def sampled_report(run: str, on: str, samples: int, temperature: float) -> dict[
         eps = sampled_episodes(
             env, agent.logits, resolve_scenario(name, {}), samples=samples, temperature=temperature, seed=k
         )
-        reached = [e for e in eps if e["success"]]
-        best_rows.append(row(name, min(reached, key=lambda e: e["energy_spent"]) if reached else None))
+        best_rows.append(row(name, best_reached(eps)))
         greedy_rows.append(row(name, eps[0]))
     env.close()
     return {
