@@ -70,6 +70,11 @@ class Demonstrations:
         the objective its search minimised: the remaining edge costs plus the search's time weight
         [J/kg per s] times the remaining flight time (the env's clock: whole steps) -- what
         :func:`pretrain`'s ``q_weight`` fits the demonstrated action's logit to. None: not recorded.
+    :param targets: discrete actions only, optional: ``(N, n_actions)`` float32, each row a
+        distribution over the actions that :func:`pretrain` fits instead of the demonstrated action
+        (cross-entropy against it): from a plan improved by lookahead, the actions tried at that
+        state weighted by the energy each reached the goal with (:func:`demonstrations`'
+        ``soft_temperature``); one-hot on the demonstrated action elsewhere. None: hard labels.
     """
 
     observations: np.ndarray
@@ -81,6 +86,7 @@ class Demonstrations:
     weights: np.ndarray
     accepted: np.ndarray | None = None
     costs_to_go: np.ndarray | None = None
+    targets: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.observations.shape[0])
@@ -96,6 +102,8 @@ def demonstrations(
     names: Sequence[str] | None = None,
     match: str | None = None,
     visit_weight: float = 1.0,
+    start_weight: float = 1.0,
+    soft_temperature: float = 0.0,
 ) -> Demonstrations:
     """Replay the ``sampler`` plans of every reference file in ``reference_dir`` through ``make_env``.
 
@@ -115,9 +123,21 @@ def demonstrations(
         rows sample the search's, so weight k restores DAgger's mixture of the two; without it one
         label where a policy keeps circling at the top of a thermal ("leave") is outvoted by the
         thousands of circling rows of the plans' climbs.
+    :param start_weight: the weight of the first row of a plan flown from the scenario's start (not
+        a DAgger plan): its first decision.
+    :param soft_temperature: > 0, primitive plans only: also build ``targets`` -- at a step of a
+        plan improved by lookahead (``candidate_costs``) the actions tried there with weights
+        ``exp(-(J - J_min) / soft_temperature)`` [J/kg], so that the fit learns how the
+        alternatives rank under the policy's own continuation, not only which one won; one-hot
+        elsewhere. 0 (default): no targets.
     :raises ConfigError: no usable plan, or a plan that does not reach the goal when replayed.
     """
     visit_weight = check_positive("visit_weight", visit_weight)
+    start_weight = check_positive("start_weight", start_weight)
+    if isinstance(soft_temperature, bool) or not isinstance(soft_temperature, (int, float)):
+        raise ConfigError(f"soft_temperature={soft_temperature!r} must be a number >= 0 [J/kg]")
+    if not 0.0 <= soft_temperature < math.inf or (soft_temperature > 0.0 and sampler != "primitive"):
+        raise ConfigError(f"soft_temperature={soft_temperature!r} must be finite, >= 0, and > 0 only for primitives")
     refs, chosen = _chosen(reference_dir, names, match)
     obs_rows: list[np.ndarray] = []
     act_rows: list[Any] = []
@@ -125,6 +145,7 @@ def demonstrations(
     ep_rows: list[np.ndarray] = []
     w_rows: list[np.ndarray] = []
     q_rows: list[np.ndarray] = []
+    t_rows: list[np.ndarray] = []
     used: list[str] = []
     costs: list[float] = []
     for name in chosen:
@@ -151,6 +172,10 @@ def demonstrations(
                 if k >= first:
                     obs_rows.append(np.asarray(obs, np.float32))
                     act_rows.append(u)
+                    if soft_temperature > 0.0:
+                        tried = ref.candidate_costs[k] if k < len(ref.candidate_costs) else []
+                        n_actions = int(getattr(env.action_space, "n", 0))
+                        t_rows.append(_soft_target(n_actions, int(u), tried, soft_temperature))
                 obs, r, terminated, truncated, info = env.step(u)
                 rewards.append(float(r))
                 edge_costs.append(float(info["edge_cost"]))
@@ -174,8 +199,7 @@ def demonstrations(
         q_rows.append(q[first:])
         ep_rows.append(np.full(len(rewards) - first, len(used), np.int64))
         w = np.ones(len(rewards) - first, np.float32)
-        if first > 0:
-            w[0] = visit_weight
+        w[0] = visit_weight if first > 0 else start_weight
         w_rows.append(w)
         used.append(name)
         costs.append(float(ref.best_cost))
@@ -194,7 +218,23 @@ def demonstrations(
         plan_costs=tuple(costs),
         weights=np.concatenate(w_rows),
         costs_to_go=np.concatenate(q_rows).astype(np.float32),
+        targets=np.stack(t_rows) if t_rows else None,
     )
+
+
+def _soft_target(n_actions: int, action: int, tried: Sequence[Sequence[Any]], temperature: float) -> np.ndarray:
+    """One row of :attr:`Demonstrations.targets`: over the ``[action, energy]`` pairs ``tried`` at
+    a state (None: missed the goal) the weights ``exp(-(J - J_min) / temperature)``, normalised;
+    one-hot on ``action`` where none of them reached the goal (or nothing was tried)."""
+    row = np.zeros(n_actions, np.float32)
+    costs = {int(a): float(c) for a, c in tried if c is not None and math.isfinite(float(c))}
+    if not costs:
+        row[action] = 1.0
+        return row
+    j_min = min(costs.values())
+    for a, c in costs.items():
+        row[a] = math.exp(-(c - j_min) / temperature)
+    return row / row.sum()
 
 
 def _chosen(
@@ -311,6 +351,7 @@ def rows(demos: Demonstrations, index: np.ndarray) -> Demonstrations:
         weights=demos.weights[index],
         accepted=None if demos.accepted is None else demos.accepted[index],
         costs_to_go=None if demos.costs_to_go is None else demos.costs_to_go[index],
+        targets=None if demos.targets is None else demos.targets[index],
     )
 
 
@@ -329,12 +370,17 @@ def with_mirror_images(
     signs = np.asarray(obs_signs, np.float32)
     if signs.shape != demos.observations.shape[1:]:
         raise ConfigError(f"obs_signs has shape {signs.shape}; expected {demos.observations.shape[1:]}")
-    accepted = None
-    if demos.accepted is not None:  # the mirrored row accepts the mirror images of the row's actions
-        image = np.asarray(mirror_action(np.arange(demos.accepted.shape[1])), np.int64)
-        flipped = np.empty_like(demos.accepted)
-        flipped[:, image] = demos.accepted
-        accepted = np.concatenate([demos.accepted, flipped])
+
+    def flipped(per_action: np.ndarray | None) -> np.ndarray | None:
+        """A per-action table and its mirror image below it: the mirrored row's entry of an action is
+        the row's entry of the action's mirror image."""
+        if per_action is None:
+            return None
+        image = np.asarray(mirror_action(np.arange(per_action.shape[1])), np.int64)
+        out = np.empty_like(per_action)
+        out[:, image] = per_action
+        return np.concatenate([per_action, out])
+
     return Demonstrations(
         observations=np.concatenate([demos.observations, demos.observations * signs]),
         actions=np.concatenate([demos.actions, np.asarray(mirror_action(demos.actions), demos.actions.dtype)]),
@@ -343,8 +389,9 @@ def with_mirror_images(
         scenarios=demos.scenarios + tuple(f"{n}~mirror" for n in demos.scenarios),
         plan_costs=demos.plan_costs + demos.plan_costs,
         weights=np.concatenate([demos.weights, demos.weights]),
-        accepted=accepted,
+        accepted=flipped(demos.accepted),
         costs_to_go=None if demos.costs_to_go is None else np.concatenate([demos.costs_to_go, demos.costs_to_go]),
+        targets=flipped(demos.targets),
     )
 
 
@@ -509,10 +556,115 @@ def sampled_episodes(
     return out
 
 
+def _fly_mode(
+    env: gym.Env, logits: Callable[[Any], np.ndarray], scenario: Scenario, prefix: Sequence[int], candidates: int
+) -> dict[str, Any]:
+    """One episode: ``prefix`` replayed, then the policy's mode to the end. Besides
+    :func:`sampled_episodes`' keys, ``options[t]`` holds the ``candidates`` actions of largest logit
+    at each step ``t`` the policy chose (empty tuples for the prefix)."""
+    obs, info = env.reset(seed=0, options={"scenario": scenario})
+    actions: list[int] = []
+    options: list[tuple[int, ...]] = []
+    terminated = truncated = False
+    while not (terminated or truncated):
+        top: tuple[int, ...] = ()
+        if len(actions) < len(prefix):
+            a = int(prefix[len(actions)])
+        else:
+            z = np.asarray(logits(obs), np.float64)
+            # stable order (largest logit first, lower index on ties): the same candidates every run
+            order = np.argsort(-z, kind="stable")
+            a, top = int(order[0]), tuple(int(i) for i in order[:candidates])
+        actions.append(a)
+        options.append(top)
+        obs, _, terminated, truncated, info = env.step(a)
+    base: Any = env.unwrapped
+    return {
+        "actions": actions,
+        "options": options,
+        "energy_spent": float(info["energy_spent"]),
+        "flight_time": float(base.time),
+        "success": bool(terminated and info.get("is_success", False)),
+    }
+
+
+def rollout_improved(
+    env: gym.Env,
+    logits: Callable[[Any], np.ndarray],
+    scenario: Scenario,
+    *,
+    candidates: int,
+    steps: int | None = None,
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The policy's mode improved by one-step lookahead with the mode as base policy (Bertsekas'
+    rollout algorithm, the policy-improvement step of approximate policy iteration).
+
+    From the first step on, each of the ``candidates`` actions of largest logit is tried, and the
+    episode is flown on by the mode; the action whose episode reaches the goal with the least
+    energy is kept (the incumbent's on ties), and the next step is decided the same way along the
+    kept episode. Since the kept episode is always among those tried, the result reaches the goal
+    whenever the mode does and spends no more energy [J/kg]; unlike the best of sampled episodes
+    (:func:`sampled_episodes`) it departs from the mode only where a departure pays.
+
+    :param env: a discrete env with the policy's observation transform (reset with the scenario);
+        deterministic, since every tried episode is replayed from the start.
+    :param logits: observation -> the policy's logits over the actions.
+    :param candidates: actions tried per step (>= 1; 1 gives the mode).
+    :param steps: decide only the first ``steps`` steps so (None: every step).
+    :returns: ``(mode, improved)`` episodes with :func:`sampled_episodes`' keys; ``improved`` also
+        has ``tried``, the episodes flown, and ``candidate_costs``: per step of its ``actions`` the
+        ``(action, energy [J/kg])`` of each action tried there, the mode flying on (None: that
+        episode missed the goal; empty lists for the steps not decided) --
+        the base policy's action values at that state, :class:`SamplerReference.candidate_costs`.
+    """
+    candidates = check_int("candidates", candidates, 1)
+    horizon = math.inf if steps is None else check_int("steps", steps, 0)
+    mode = _fly_mode(env, logits, scenario, (), candidates)
+
+    def key(ep: dict[str, Any]) -> float:
+        return ep["energy_spent"] if ep["success"] else math.inf
+
+    def cost(ep: dict[str, Any]) -> float | None:
+        return ep["energy_spent"] if ep["success"] else None
+
+    best, tried, t = mode, 1, 0
+    costs: list[list[tuple[int, float | None]]] = []  # per decided step: (action, its episode's energy)
+    while t < min(horizon, len(best["actions"])):
+        prefix = best["actions"][:t]
+        here = [(best["actions"][t], cost(best))]
+        for a in best["options"][t]:
+            if a == here[0][0]:
+                continue
+            ep = _fly_mode(env, logits, scenario, [*prefix, a], candidates)
+            tried += 1
+            here.append((a, cost(ep)))
+            if key(ep) < key(best):
+                # the shared prefix keeps its candidates: later steps are decided along the new episode
+                ep["options"][:t] = best["options"][:t]
+                best = ep
+        costs.append(here)
+        t += 1
+    costs += [[] for _ in range(len(best["actions"]) - len(costs))]
+    return mode, {**best, "tried": tried, "candidate_costs": costs}
+
+
 def best_reached(episodes: Sequence[dict[str, Any]]) -> dict[str, Any] | None:
     """The episode of :func:`sampled_episodes` that reaches the goal with the least energy (None: none does)."""
     reached = [e for e in episodes if e["success"]]
     return min(reached, key=lambda e: e["energy_spent"]) if reached else None
+
+
+def _label_log_prob(lp: Any, act: Any, accepted: Any, targets: Any, idx: Any) -> Any:
+    """Per row of a minibatch, the log-likelihood :func:`pretrain` maximises, from the policy's
+    log-probabilities ``lp``: of the demonstrated action, of the accepted set (the log of its summed
+    probability), or the expectation under the row's target distribution (a cross-entropy)."""
+    import torch
+
+    if accepted is not None:
+        return torch.logsumexp(lp.masked_fill(~accepted[idx], -math.inf), dim=1)
+    if targets is not None:
+        return (targets[idx] * lp).sum(dim=1)
+    return lp.gather(1, act.long()[:, None]).squeeze(1)
 
 
 def pretrain(
@@ -531,7 +683,8 @@ def pretrain(
 ) -> list[dict[str, float]]:
     """Fit an SB3 ``ActorCriticPolicy`` to ``demos``: the actor by the negative log-likelihood of the
     demonstrated actions (with ``demos.accepted``: of the set of actions each row accepts, the log
-    of their summed probability), the critic by least squares on the returns-to-go, each row
+    of their summed probability; with ``demos.targets``: the cross-entropy against each row's
+    target distribution), the critic by least squares on the returns-to-go, each row
     weighted by ``demos.weights`` (a weighted mean per minibatch; with all weights 1 the plain mean).
 
     By default the policy's own optimizer is left alone (a fresh Adam here, so that PPO's starts
@@ -573,6 +726,11 @@ def pretrain(
     accepted = None if demos.accepted is None else torch.as_tensor(demos.accepted, dtype=torch.bool)
     if accepted is not None and (act.dtype.is_floating_point or accepted.shape[0] != len(act)):
         raise ConfigError(f"pretrain: accepted of shape {tuple(accepted.shape)} needs one row per discrete action")
+    targets = None if demos.targets is None else torch.as_tensor(demos.targets, dtype=torch.float32)
+    if targets is not None and (act.dtype.is_floating_point or targets.shape[0] != len(act) or accepted is not None):
+        raise ConfigError(
+            f"pretrain: targets of shape {tuple(targets.shape)} need one row per discrete action, and no accepted sets"
+        )
     if isinstance(q_weight, bool) or not isinstance(q_weight, (int, float)) or not 0.0 <= q_weight < math.inf:
         raise ConfigError(f"pretrain: q_weight={q_weight!r} must be a finite number >= 0")
     fit_q = q_weight > 0.0
@@ -609,17 +767,13 @@ def pretrain(
                 feats = policy.extract_features(obs[idx], policy.pi_features_extractor)
                 raw = policy.action_net(policy.mlp_extractor.forward_actor(feats))
                 values = policy.predict_values(obs[idx])
-                lp = torch.log_softmax(raw, dim=1)
-                if accepted is None:
-                    log_prob = lp.gather(1, act[idx].long()[:, None]).squeeze(1)
-                else:
-                    log_prob = torch.logsumexp(lp.masked_fill(~accepted[idx], -math.inf), dim=1)
-            elif accepted is None:
+                log_prob = _label_log_prob(torch.log_softmax(raw, dim=1), act[idx], accepted, targets, idx)
+            elif accepted is None and targets is None:
                 values, log_prob, _ = policy.evaluate_actions(obs[idx], act[idx])
-            else:  # log of the accepted set's probability (Categorical's logits are log-probabilities)
+            else:  # Categorical's logits are log-probabilities
                 values = policy.predict_values(obs[idx])
                 lp = policy.get_distribution(obs[idx]).distribution.logits
-                log_prob = torch.logsumexp(lp.masked_fill(~accepted[idx], -math.inf), dim=1)
+                log_prob = _label_log_prob(lp, act[idx], accepted, targets, idx)
             sq = (values.flatten() - ret[idx]) ** 2
             if wts is None:
                 nll, vloss = -log_prob.mean(), torch.mean(sq)
@@ -669,6 +823,7 @@ __all__ = [
     "demo_reference_config",
     "demonstrations",
     "pretrain",
+    "rollout_improved",
     "rows",
     "sampled_episodes",
     "visited_prefixes",

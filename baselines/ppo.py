@@ -142,6 +142,11 @@ class TrainConfig:
         read as ``beta - alpha * logit`` [kJ/kg], is fitted to the plan's cost from that state on
         (edge costs plus the search's time weight times the time left), beside the cross-entropy.
         0 (default): off.
+    :param demo_soft_temperature: discrete policies with ``demos`` [J/kg]: where a plan was improved
+        by lookahead (``scripts/demos.py --self-imitate RUN --lookahead C``, which records what each
+        tried primitive cost), the row's label is the distribution ``exp(-(J - J_min) / T)`` over the
+        primitives tried there rather than the one kept (:func:`baselines.imitation.demonstrations`).
+        0 (default): hard labels.
     :param log_std_init: initial log standard deviation of the continuous policy.
     :param shaping: weight of this module's extra potential-based shaping (Ng et al. 1999),
         ``shaping * (gamma * phi(s') - phi(s))`` with ``phi = -d_goal / 1 km``; 0 (default) leaves
@@ -179,6 +184,10 @@ class TrainConfig:
     :param demo_visit_weight: the weight of each DAgger plan's first row, the state the policy
         visited, in the cloning (:func:`baselines.imitation.demonstrations`; e.g. the round's
         ``--every``). 1 (default): every row alike.
+    :param demo_start_weight: the weight of each plan's row at the scenario's start (a plan flown
+        from time 0, not a DAgger plan): the first decision, which picks the thermal a flight heads
+        for (README, round fourteen: a lookahead at that step alone halves the clone's regret), is
+        one row in a plan's seven or so. 1 (default): every row alike.
     :param demo_epochs: passes of the behaviour cloning over the demonstrations (0: none, e.g. to
         rehearse the demonstrations of a policy that ``init_from`` cloned before).
     :param demo_learning_rate: Adam step size of the behaviour cloning.
@@ -228,6 +237,7 @@ class TrainConfig:
     scorer_lift: bool = False
     demo_equivalents: bool = False
     demo_q_weight: float = 0.0
+    demo_soft_temperature: float = 0.0
     log_std_init: float = -0.5
     shaping: float = 0.0
     body_frame: bool | None = None
@@ -239,6 +249,7 @@ class TrainConfig:
     demo_match: str | None = None
     demo_mirror: bool = True
     demo_visit_weight: float = 1.0
+    demo_start_weight: float = 1.0
     demo_epochs: int = 200
     demo_learning_rate: float = 1e-3
     demo_lr_final_fraction: float = 1.0
@@ -334,6 +345,15 @@ class TrainConfig:
         object.__setattr__(self, "demo_q_weight", float(qw))
         if qw > 0.0 and (self.demos is None or self.algo in CONTINUOUS_ALGOS):
             raise ValueError(f"demo_q_weight={qw!r} needs demos and a discrete algo (got algo={self.algo!r})")
+        st = self.demo_soft_temperature
+        if isinstance(st, bool) or not isinstance(st, (int, float)) or not 0.0 <= st < math.inf:
+            raise ValueError(f"demo_soft_temperature={st!r} must be a finite number >= 0 [J/kg]")
+        object.__setattr__(self, "demo_soft_temperature", float(st))
+        if st > 0.0 and (self.demos is None or self.algo in CONTINUOUS_ALGOS or self.demo_equivalents):
+            raise ValueError(
+                f"demo_soft_temperature={st!r} needs demos and a discrete algo, without demo_equivalents "
+                f"(got algo={self.algo!r})"
+            )
         f = self.demo_starts
         if isinstance(f, bool) or not isinstance(f, (int, float)) or not 0.0 <= f <= 1.0:
             raise ValueError(f"demo_starts={f!r} must be a number in [0, 1]")
@@ -342,9 +362,10 @@ class TrainConfig:
             raise ValueError("demo_starts needs demos")
         if f > 0.0 and self.vec_env == "native":
             raise ValueError("demo_starts needs vec_env='dummy' or 'subproc' (DemoStarts wraps single envs)")
-        w = self.demo_visit_weight
-        if isinstance(w, bool) or not isinstance(w, (int, float)) or not 0.0 < w < math.inf:
-            raise ValueError(f"demo_visit_weight={w!r} must be a finite number > 0")
+        for field in ("demo_visit_weight", "demo_start_weight"):
+            w = getattr(self, field)
+            if isinstance(w, bool) or not isinstance(w, (int, float)) or not 0.0 < w < math.inf:
+                raise ValueError(f"{field}={w!r} must be a finite number > 0")
         if not isinstance(self.demo_mirror, bool):
             raise ValueError(f"demo_mirror={self.demo_mirror!r} must be true or false")
         if int(self.demo_epochs) < 0 or not 0.0 < float(self.demo_learning_rate) < 1.0:
@@ -1211,6 +1232,8 @@ def _clone_demos(model: Any, config: TrainConfig, out: Path) -> tuple[dict[str, 
         to_policy_action=to_policy_action,
         match=config.demo_match,
         visit_weight=float(config.demo_visit_weight),
+        start_weight=float(config.demo_start_weight),
+        soft_temperature=float(config.demo_soft_temperature),
     )
     mirrored = bool(config.demo_mirror)
     demos = plans

@@ -220,13 +220,25 @@ def _two_rows(first: np.ndarray, second: np.ndarray, action: int) -> Any:
     )
 
 
+def _fit_tiny(env: gym.Env, demos: Any, epochs: int, batch_size: int) -> tuple[list[dict[str, float]], np.ndarray]:
+    """A fresh 16-unit PPO policy on ``env``, cloned from ``demos`` (step size 0.01, seed 0): the
+    cloning's per-epoch losses and the policy's action probabilities at the first row."""
+    import torch
+    from stable_baselines3 import PPO
+
+    torch.manual_seed(0)
+    model = PPO("MlpPolicy", env, seed=0, device="cpu", policy_kwargs={"net_arch": [16]})
+    log = pretrain(model.policy, demos, epochs=epochs, learning_rate=1e-2, batch_size=batch_size, seed=0)
+    with torch.no_grad():
+        dist = model.policy.get_distribution(torch.as_tensor(demos.observations[:1])).distribution
+    return log, dist.probs.numpy()[0]
+
+
 def test_set_labels_fit_the_probability_of_the_set() -> None:
     """``accepted`` labels: one observation whose label accepts primitives {3, 40} is fitted until
     the two together hold nearly all the probability (either alone need not); a label that accepts
     only the demonstrated action gives the plain cloning's losses bit for bit; the mirror image
     of a row accepts the mirror images of its actions; a set that does not fit is refused."""
-    import torch
-    from stable_baselines3 import PPO
 
     from baselines.imitation import Demonstrations, rows, with_mirror_images
 
@@ -238,12 +250,7 @@ def test_set_labels_fit_the_probability_of_the_set() -> None:
     acc[:, [3, 40]] = True
 
     def fit(demos: Demonstrations, epochs: int) -> tuple[list[dict[str, float]], np.ndarray]:
-        torch.manual_seed(0)
-        model = PPO("MlpPolicy", env, seed=0, device="cpu", policy_kwargs={"net_arch": [16]})
-        log = pretrain(model.policy, demos, epochs=epochs, learning_rate=1e-2, batch_size=2, seed=0)
-        with torch.no_grad():
-            dist = model.policy.get_distribution(torch.as_tensor(demos.observations[:1])).distribution
-        return log, dist.probs.numpy()[0]
+        return _fit_tiny(env, demos, epochs, batch_size=2)
 
     _, p = fit(dataclasses.replace(base, accepted=acc), 300)
     assert p[3] + p[40] > 0.98
@@ -258,6 +265,63 @@ def test_set_labels_fit_the_probability_of_the_set() -> None:
     assert np.array_equal(rows(both, np.array([2])).accepted, both.accepted[2:3])
     with pytest.raises(ConfigError, match="accepted"):
         fit(dataclasses.replace(base, accepted=acc[:1]), 1)
+    env.close()
+
+
+def test_soft_targets_weigh_the_tried_primitives_by_their_energy(ref_dir: Path, tmp_path: Path) -> None:
+    """Closed form: at a step where lookahead tried primitives 3 (J), 40 (J + T ln 2) and 41 (missed
+    the goal), the target puts 2/3 and 1/3 on 3 and 40 and nothing on 41; steps with nothing tried,
+    or only misses, are one-hot on the flown primitive; the fit against the targets reaches them;
+    one-hot targets give the plain cloning's losses bit for bit; the mirror image of a row's target
+    sits on the mirror images of its primitives; the plan file keeps the costs; bad settings refused."""
+
+    from baselines.imitation import rows, with_mirror_images
+
+    name = SCENARIOS[0].name
+    ref = load_reference(ref_dir / f"{name}.json")
+    plan = ref.samplers["primitive"]
+    flown = [int(a) for a in plan.actions]
+    t = 50.0
+    tried = [[[flown[0], 1000.0], [40, 1000.0 + t * math.log(2.0)], [41, None]], [[flown[1], None]]]
+    tried += [[] for _ in flown[2:]]
+    save_reference(
+        dataclasses.replace(ref, samplers={"primitive": dataclasses.replace(plan, candidate_costs=tried)}),
+        tmp_path / f"{name}.json",
+    )
+    assert load_reference(tmp_path / f"{name}.json").samplers["primitive"].candidate_costs == tried
+    assert "candidate_costs" not in json.loads((ref_dir / f"{name}.json").read_text())["samplers"]["primitive"]
+    d = demonstrations(tmp_path, _env(DISCRETE_ID), sampler="primitive", gamma=1.0, soft_temperature=t)
+    assert d.targets is not None and d.targets.shape == (len(flown), 174) and d.targets.dtype == np.float32
+    want = np.zeros(174)
+    want[[flown[0], 40]] = [2 / 3, 1 / 3]
+    assert np.allclose(d.targets[0], want, atol=1e-6)
+    for k in range(1, len(flown)):
+        assert d.targets[k, flown[k]] == 1.0 and d.targets[k].sum() == 1.0
+    hard = demonstrations(tmp_path, _env(DISCRETE_ID), sampler="primitive", gamma=1.0)
+    assert hard.targets is None and np.array_equal(hard.actions, d.actions)
+    env = _env(DISCRETE_ID)(SCENARIOS[0])
+    n = int(env.action_space.n)
+    mirror_prim = env.unwrapped.library.mirror_indices()
+    both = with_mirror_images(d, np.ones(d.observations.shape[1], np.float32), lambda a: mirror_prim[a])
+    assert both.targets is not None and np.allclose(both.targets[len(d)][mirror_prim[[flown[0], 40]]], [2 / 3, 1 / 3])
+    assert np.array_equal(rows(both, np.array([len(d)])).targets, both.targets[len(d) : len(d) + 1])
+
+    def fit(demos: Any, epochs: int) -> tuple[list[dict[str, float]], np.ndarray]:
+        return _fit_tiny(env, demos, epochs, batch_size=4)
+
+    first = rows(d, np.array([0]))
+    _, p = fit(first, 400)
+    assert abs(p[flown[0]] - 2 / 3) < 0.03 and abs(p[40] - 1 / 3) < 0.03
+    one_hot = np.zeros((len(d), n), np.float32)
+    one_hot[np.arange(len(d)), d.actions] = 1.0
+    assert fit(dataclasses.replace(d, targets=one_hot), 3)[0] == fit(hard, 3)[0]
+    with pytest.raises(ConfigError, match="targets"):
+        fit(dataclasses.replace(d, targets=one_hot[:1]), 1)
+    for bad in (-1.0, math.nan, math.inf, "50", True):
+        with pytest.raises(ConfigError, match="soft_temperature"):
+            demonstrations(tmp_path, _env(DISCRETE_ID), sampler="primitive", gamma=1.0, soft_temperature=bad)
+    with pytest.raises(ConfigError, match="soft_temperature"):
+        demonstrations(tmp_path, _env(CONTINUOUS_ID), sampler="continuous", gamma=1.0, soft_temperature=t)
     env.close()
 
 
@@ -297,6 +361,13 @@ def test_costs_to_go_are_the_plans_objective_from_each_row(ref_dir: Path, tmp_pa
     both = with_mirror_images(d, np.ones(d.observations.shape[1], np.float32), lambda a: a)
     assert both.costs_to_go is not None and np.array_equal(both.costs_to_go, np.tile(d.costs_to_go, 2))
     assert np.array_equal(rows(d, np.array([2, 0])).costs_to_go, d.costs_to_go[[2, 0]])
+    # the first row of a plan from the start weighs start_weight, a DAgger plan's visit_weight
+    kw: dict[str, Any] = {"sampler": "primitive", "gamma": 1.0, "visit_weight": 3, "start_weight": 5}
+    w = demonstrations(tmp_path, _env(DISCRETE_ID), **kw).weights
+    assert w[0] == 5.0 and w[n] == 3.0 and np.all(np.delete(w, [0, n]) == 1.0)
+    for bad in (0.0, -1.0, math.nan):
+        with pytest.raises(ConfigError, match="start_weight"):
+            demonstrations(tmp_path, _env(DISCRETE_ID), sampler="primitive", gamma=1.0, start_weight=bad)
 
 
 def test_cost_fit_reads_the_logits_as_costs_and_bad_settings_are_refused() -> None:
@@ -344,6 +415,13 @@ def test_cost_fit_reads_the_logits_as_costs_and_bad_settings_are_refused() -> No
     for algo, demos_dir in (("continuous", "."), ("discrete", None)):
         with pytest.raises(ValueError, match=r"demo_q_weight=1\.0 needs demos and a discrete algo"):
             TrainConfig(algo=algo, demos=demos_dir, demo_q_weight=1.0)
+    for bad in (-1, math.nan, math.inf, "50", True):
+        with pytest.raises(ValueError, match="demo_soft_temperature"):
+            TrainConfig(algo="discrete", demos=".", demo_soft_temperature=bad)  # type: ignore[arg-type]
+    equivalents: dict[str, Any] = {"policy": "successor", "demo_equivalents": True}
+    for algo, demos_dir, kw in (("continuous", ".", {}), ("discrete", None, {}), ("discrete", ".", equivalents)):
+        with pytest.raises(ValueError, match=r"demo_soft_temperature=50\.0 needs demos and a discrete algo"):
+            TrainConfig(algo=algo, demos=demos_dir, demo_soft_temperature=50.0, **kw)
 
 
 def test_cloning_step_size_falls_linearly_and_bad_settings_are_refused(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -415,6 +493,7 @@ def _tiny_run(algo: str, ref_dir: Path, **kwargs: object) -> TrainConfig:
         ("discrete", {"policy": "scoring", "scorer_hidden": (8,)}),
         ("discrete", {"policy": "successor", "scorer_hidden": (8,)}),
         ("discrete", {"policy": "successor", "scorer_hidden": (8,), "demo_q_weight": 10.0}),
+        ("discrete", {"policy": "successor", "scorer_hidden": (8,), "demo_soft_temperature": 50.0}),
         ("masked", {}),
         ("grid", {"final_glide": True}),
     ],
@@ -454,8 +533,9 @@ def test_train_with_demos_saves_the_cloned_start(ref_dir: Path, tmp_path: Path) 
     with pytest.raises(ValueError, match="demo_mirror"):
         TrainConfig(demos=str(ref_dir), demo_mirror="yes")
     for bad in (0, -2.0, float("nan"), float("inf"), "30", True):
-        with pytest.raises(ValueError, match="demo_visit_weight"):
-            TrainConfig(demos=str(ref_dir), demo_visit_weight=bad)
+        for field in ("demo_visit_weight", "demo_start_weight"):
+            with pytest.raises(ValueError, match=field):
+                TrainConfig(demos=str(ref_dir), **{field: bad})
     with pytest.raises(ValueError, match="demo_epochs"):
         TrainConfig(demo_epochs=-1)
 
@@ -716,6 +796,52 @@ def test_sampled_episodes_draw_from_the_tempered_softmax() -> None:
     env.close()
 
 
+def _replayed(scenario: Scenario, actions: Any) -> tuple[bool, float]:
+    """Fly ``actions`` through a plain ``Soaring-v0`` in ``scenario``: whether the last step reached
+    the goal, and the energy spent [J/kg]."""
+    env = gym.make(DISCRETE_ID, scenario=scenario)
+    env.reset(seed=0)
+    for a in actions:
+        info = env.step(int(a))[4]
+    env.close()
+    return bool(info["is_success"]), float(info["energy_spent"])
+
+
+def test_rollout_improved_is_no_worse_than_any_first_step_deviation() -> None:
+    """Exhaustive on a tiny case: the mode improved by lookahead over 4 primitives reaches the goal
+    with no more energy than the mode and than each of the 3 episodes that leave the mode at the
+    first step alone (what its first decision tries); it replays through ``env.step`` to its cost;
+    one candidate, or no step decided, gives the mode; it is deterministic; bad settings refused.
+    The policy is the published clone ``m3-s0`` (a tiny one reaches no goal)."""
+    from baselines.agents import PPOAgent
+    from baselines.evaluation import make_env, ppo_env_kwargs
+    from baselines.imitation import rollout_improved
+
+    agent = PPOAgent(Path(__file__).resolve().parents[1] / "results" / "ppo-score" / "m3-s0" / "discrete")
+    env = make_env(agent.env_id, ppo_env_kwargs(agent.config))
+    agent.reset(env)
+    sc = get_scenario("random-20005")
+    mode, best = rollout_improved(env, agent.logits, sc, candidates=4)
+    assert mode["success"] and best["success"] and best["energy_spent"] <= mode["energy_spent"]
+    assert best["tried"] >= 4 and len(best["options"]) == len(best["actions"])
+    z = agent.logits(env.reset(seed=0, options={"scenario": sc})[0])
+    for a in np.argsort(-z, kind="stable")[1:4]:  # leave the mode at the first step, the mode flying on
+        obs, _ = env.reset(seed=0, options={"scenario": sc})
+        obs, _, term, trunc, info = env.step(int(a))
+        while not (term or trunc):
+            obs, _, term, trunc, info = env.step(int(np.argmax(agent.logits(obs))))
+        assert not (term and info["is_success"]) or best["energy_spent"] <= info["energy_spent"]
+    assert _replayed(sc, best["actions"]) == (True, best["energy_spent"])
+    for kwargs in ({"candidates": 1}, {"candidates": 4, "steps": 0}):
+        same = rollout_improved(env, agent.logits, sc, **kwargs)[1]
+        assert same["actions"] == mode["actions"] and same["energy_spent"] == mode["energy_spent"]
+    assert rollout_improved(env, agent.logits, sc, candidates=4) == (mode, best)
+    for bad in ({"candidates": 0}, {"candidates": 2.5}, {"candidates": 2, "steps": -1}):
+        with pytest.raises(ConfigError):
+            rollout_improved(env, agent.logits, sc, **bad)
+    env.close()
+
+
 def test_demos_cli_self_imitation_keeps_better_sampled_episodes_and_resumes(
     ref_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -741,12 +867,7 @@ def test_demos_cli_self_imitation_keeps_better_sampled_episodes_and_resumes(
         if row["kept"]:
             assert row["greedy"] is None or row["best_sampled"] <= row["greedy"] - 20.0
             plan = load_reference(path).samplers["primitive"]
-            env = gym.make(DISCRETE_ID, scenario=get_scenario(name))
-            env.reset(seed=0)
-            for a in plan.actions:
-                info = env.step(int(a))[4]
-            assert info["is_success"] and info["energy_spent"] == plan.best_cost
-            env.close()
+            assert _replayed(get_scenario(name), plan.actions) == (True, plan.best_cost)
     stamp = log_path.stat().st_mtime_ns
     assert main(["--self-imitate", str(run), *common]) == 0 and log_path.stat().st_mtime_ns == stamp
     assert "0 of 3 scenarios to fly" in capsys.readouterr().out
@@ -763,6 +884,18 @@ def test_demos_cli_self_imitation_keeps_better_sampled_episodes_and_resumes(
     with pytest.raises(SystemExit) as exc:
         main(["--self-imitate", str(run), *common, "--samples", "7"])  # the log holds other settings
     assert exc.value.code == 2 and "other settings" in capsys.readouterr().err
+    # --lookahead: the mode improved by lookahead, kept with margin 0 wherever it reaches the goal
+    look = ["--scenarios", "2", "--first", "5", "--lookahead", "3", "--margin", "0", "--tag", "p1", "--no-progress"]
+    assert main(["--self-imitate", str(run), *look, "--out", str(out)]) == 0
+    log = json.loads((out / "self-imitation" / "p1-20005+2.json").read_text())
+    assert log["settings"]["lookahead"] == 3 and "samples" not in log["settings"]
+    for name, row in log["scenarios"].items():
+        assert row["kept"] and (row["greedy"] is None or row["best_sampled"] <= row["greedy"])
+        plan = load_reference(out / f"{name}-p1s0.json").samplers["primitive"]
+        assert _replayed(get_scenario(name), plan.actions) == (True, plan.best_cost)
+    with pytest.raises(SystemExit) as exc:
+        main(["--self-imitate", str(run), *look[:-5], "--lookahead", "0", "--out", str(out)])
+    assert exc.value.code == 2 and "--lookahead" in capsys.readouterr().err
     grid = train(_tiny_run("grid", ref_dir, demo_epochs=1), tmp_path / "grid")
     with pytest.raises(SystemExit) as exc:
         main(["--self-imitate", str(grid), *common[:-1], str(tmp_path / "g")])
@@ -1153,6 +1286,12 @@ def test_diagnose_clone_fit_and_ensemble(
         assert mode["energy_spent"] == one["energy_spent"] and mode["regret"] == one["regret"]
         assert row["success"] and row["energy_spent"] <= mode["energy_spent"]
     assert best == dc.sampled_report(str(out), "tiny", 4, 1.0)  # seeded
+    # rollout: the same modes; the improved episode no dearer; one candidate is the mode itself
+    look = dc.sampled_report(str(out), "tiny", 0, 1.0, candidates=3)
+    assert look["greedy"] == best["greedy"] and look["episodes_flown"] >= len(SCENARIOS)
+    for row, mode in zip(look["episodes"], look["greedy"], strict=True):
+        assert row["success"] and row["energy_spent"] <= mode["energy_spent"]
+    assert dc.sampled_report(str(out), "tiny", 0, 1.0, candidates=1)["episodes"] == best["greedy"]
     obs, _ = env.reset(seed=0, options={"scenario": SCENARIOS[0]})
     agent.reset(env, 0)
     assert int(np.argmax(agent.logits(obs))) == int(agent.predict(obs)[0])  # the policy's mode
@@ -1168,6 +1307,9 @@ def test_diagnose_clone_fit_and_ensemble(
         (["sampled", "--runs", str(out), str(out)], "one run"),
         (["sampled", "--runs", str(out), "--temperature", "0"], "--temperature"),
         (["sampled", "--runs", str(out), "--samples", "0"], "--samples"),
+        (["rollout", "--runs", str(out), str(out)], "one run"),
+        (["rollout", "--runs", str(out), "--candidates", "0"], "--candidates"),
+        (["rollout", "--runs", str(out), "--steps", "-1"], "--steps"),
     ):
         with pytest.raises(SystemExit):
             dc.main(argv)

@@ -16,6 +16,9 @@ the states a trained policy visits.
     # self-imitation: a discrete run's own best of 8 sampled episodes where it beats its mode by 20 J/kg
     python scripts/demos.py --scenarios 200 --first 2000 --self-imitate results/ppo-score/m3-s0 --samples 8 \
         --tag x1 --out results/reference-train-prim-t1
+    # ... or its mode improved by one-step lookahead over its 8 likeliest primitives (policy iteration)
+    python scripts/demos.py --scenarios 200 --first 5000 --self-imitate results/ppo-score/m3-s0 --lookahead 8 \
+        --margin 0 --tag p1 --out results/reference-train-prim-t1
     # goal reaching at Ts = 10 s on the physical envelope: the goal env's own search in that env
     python scripts/demos.py --scenarios 600 --out results/reference-train-ts10 \
         --env-kwargs '{"duration": 10, "envelope": "physical", "n_points": 10, "max_steps": 120, "time_limit": 1200}'
@@ -105,6 +108,14 @@ def main(argv: list[str] | None = None) -> int:
         "--margin", type=float, default=20.0, help="with --self-imitate: least gain over the mode [J/kg] (20)"
     )
     p.add_argument(
+        "--lookahead",
+        type=int,
+        default=None,
+        metavar="C",
+        help="with --self-imitate: instead of sampling, improve the mode by one-step lookahead over its C "
+        "likeliest primitives at every step, the mode flying on (baselines.imitation.rollout_improved)",
+    )
+    p.add_argument(
         "--env-kwargs",
         default=None,
         metavar="JSON",
@@ -129,6 +140,8 @@ def main(argv: list[str] | None = None) -> int:
             p.error(f"--temperature={args.temperature} must be > 0 and --margin={args.margin} >= 0 (finite)")
         if args.samples < 1:
             p.error(f"--samples={args.samples} must be >= 1")
+        if args.lookahead is not None and args.lookahead < 1:
+            p.error(f"--lookahead={args.lookahead} must be >= 1 (primitives tried per step)")
         try:
             return _self_imitation(args)
         except (ConfigError, FileNotFoundError) as exc:
@@ -252,7 +265,9 @@ def _self_imitation(args: argparse.Namespace) -> int:
     """``--self-imitate``: per scenario the run's greedy episode and ``--samples`` sampled ones
     (:func:`baselines.imitation.sampled_episodes`, seeded by the scenario's seed); the best
     sampled episode that reaches the goal becomes a plan file ``<name>-<tag>s0.json`` where it
-    spends at least ``--margin`` J/kg less than the greedy one. Every scenario's outcome goes to
+    spends at least ``--margin`` J/kg less than the greedy one. With ``--lookahead C`` the greedy
+    episode improved by one-step lookahead (:func:`baselines.imitation.rollout_improved`) takes the
+    sampled ones' place (the log's ``best_sampled``). Every scenario's outcome goes to
     ``self-imitation/<tag>-<first seed>+<count>.json`` in ``--out`` (atomically, after each
     scenario), which the same command resumes from."""
     import dataclasses
@@ -261,7 +276,7 @@ def _self_imitation(args: argparse.Namespace) -> int:
     from baselines._runs import progress_bar
     from baselines.agents import PPOAgent
     from baselines.evaluation import make_env, ppo_env_kwargs, ppo_model_path
-    from baselines.imitation import best_reached, sampled_episodes
+    from baselines.imitation import best_reached, rollout_improved, sampled_episodes
     from baselines.reference import SamplerReference, ScenarioReference, save_reference
 
     agent = PPOAgent(ppo_model_path(args.self_imitate, args.ppo_model))
@@ -274,10 +289,14 @@ def _self_imitation(args: argparse.Namespace) -> int:
     # in a subfolder, since every JSON file of --out is read as a plan
     log_path = args.out / "self-imitation" / f"{args.tag}-{DEMO_SEED0 + args.first}+{args.scenarios}.json"
     log_path.parent.mkdir(exist_ok=True)
+    method: dict[str, Any] = (
+        {"samples": args.samples, "temperature": args.temperature}
+        if args.lookahead is None
+        else {"lookahead": args.lookahead}
+    )
     settings = {
         "self_imitate": str(agent.model_path),
-        "samples": args.samples,
-        "temperature": args.temperature,
+        **method,
         "margin": args.margin,
         "time_weight": 0.0,  # chosen by energy alone
     }
@@ -286,16 +305,23 @@ def _self_imitation(args: argparse.Namespace) -> int:
         raise ConfigError(f"{log_path} was written with other settings: {log.get('settings')}")
     names = [f"random-{DEMO_SEED0 + args.first + k}" for k in range(args.scenarios)]
     todo = [n for n in names if n not in log["scenarios"]]
-    print(f"self-imitation: {len(todo)} of {len(names)} scenarios to fly, {args.samples} samples each", flush=True)
+    how = f"{args.samples} samples" if args.lookahead is None else f"lookahead over {args.lookahead} primitives"
+    print(f"self-imitation: {len(todo)} of {len(names)} scenarios to fly, {how} each", flush=True)
     bar = progress_bar(len(todo), 0, not args.no_progress, "self-imitation", "scenario")
     t0 = time.perf_counter()
     for name in todo:
         sc = get_scenario(name)
         t1 = time.perf_counter()
-        greedy, *drawn = sampled_episodes(
-            env, agent.logits, sc, samples=args.samples, temperature=args.temperature, seed=int(name.split("-")[1])
-        )
-        best = best_reached(drawn)
+        if args.lookahead is None:
+            greedy, *drawn = sampled_episodes(
+                env, agent.logits, sc, samples=args.samples, temperature=args.temperature, seed=int(name.split("-")[1])
+            )
+            best = best_reached(drawn)
+            flown = {"reached": sum(e["success"] for e in drawn)}
+        else:
+            greedy, improved = rollout_improved(env, agent.logits, sc, candidates=args.lookahead)
+            best = improved if improved["success"] else None
+            flown = {"tried": improved["tried"]}
         greedy_cost = greedy["energy_spent"] if greedy["success"] else math.inf
         kept = best is not None and best["energy_spent"] <= greedy_cost - args.margin
         if kept and best is not None:
@@ -308,13 +334,14 @@ def _self_imitation(args: argparse.Namespace) -> int:
                 settings={**settings, "greedy_cost": greedy["energy_spent"] if greedy["success"] else None},
                 rollouts=0,
                 seconds=round(time.perf_counter() - t1, 3),
+                candidate_costs=[[[a, c] for a, c in step] for step in best.get("candidate_costs", [])],
             )
             copy = dataclasses.replace(sc, name=f"{name}-{args.tag}s0")
             save_reference(ScenarioReference(copy, math.nan, {"primitive": plan}), args.out / f"{copy.name}.json")
         log["scenarios"][name] = {
             "greedy": greedy["energy_spent"] if greedy["success"] else None,
             "best_sampled": best["energy_spent"] if best is not None else None,
-            "reached": sum(e["success"] for e in drawn),
+            **flown,
             "kept": kept,
         }
         atomic_write_text(log_path, json.dumps(log, indent=1) + "\n")
@@ -327,7 +354,8 @@ def _self_imitation(args: argparse.Namespace) -> int:
     kept_rows = [r for r in rows if r["kept"]]
     gain = sum(r["greedy"] - r["best_sampled"] for r in kept_rows if r["greedy"] is not None)
     print(
-        f"{len(kept_rows)} of {len(rows)} scenarios kept (best sampled episode beats the mode by >= "
+        f"{len(kept_rows)} of {len(rows)} scenarios kept ({'best sampled' if args.lookahead is None else 'improved'} "
+        f"episode beats the mode by >= "
         f"{args.margin:g} J/kg; {gain / max(len(kept_rows), 1):.0f} J/kg on average where the mode reached the goal) "
         f"in {time.perf_counter() - t0:.0f} s -> {args.out} ({log_path.name})",
         flush=True,

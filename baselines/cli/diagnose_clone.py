@@ -1,6 +1,6 @@
 """Diagnose a cloned primitive policy (README, round ten): where does its regret come from?
 
-Four measurements for the successor policies of ``scripts/train_ppo.py --algo discrete --set
+Measurements for the successor policies of ``scripts/train_ppo.py --algo discrete --set
 'policy="successor"'`` and their demonstrations, each written as JSON (``--out``) and printed:
 
 * ``fit``: how well the policy fits demonstrations (``--demos`` folder, ``--match`` regular
@@ -29,6 +29,10 @@ Four measurements for the successor policies of ``scripts/train_ppo.py --algo di
   and ``--samples`` episodes drawn from its logits (``--temperature``,
   :func:`baselines.imitation.sampled_episodes`), the best of them by energy scored. Not an agent
   (it picks with the simulator): the headroom ``scripts/demos.py --self-imitate`` clones from.
+* ``rollout`` (round fourteen): one run's mode improved by one-step lookahead
+  (:func:`baselines.imitation.rollout_improved`): at each step (the first ``--steps``) each of the
+  ``--candidates`` primitives of largest logit is tried, the mode flying on, and the cheapest kept.
+  Also not an agent: the policy-improvement step that ``scripts/demos.py --improve`` clones from.
 
 Scenario sets (``--on``): ``val`` = ``random-5000 ... 5019`` against ``results/reference-val``
 (narrow primitive references, made for this round), ``h21`` = ``paper`` + ``random-10000 ...
@@ -42,6 +46,7 @@ Usage::
     python scripts/diagnose_clone.py consistency --samples 60 --out results/ppo-score/round11/consistency
     python scripts/diagnose_clone.py ensemble --runs results/ppo-score/s2 results/ppo-score/s3 --on h100
     python scripts/diagnose_clone.py sampled --runs results/ppo-score/m3-s0 --samples 32 --on val
+    python scripts/diagnose_clone.py rollout --runs results/ppo-score/m3-s0 --candidates 8 --on val
 """
 
 from __future__ import annotations
@@ -352,13 +357,17 @@ def ensemble_report(
     }
 
 
-def sampled_report(run: str, on: str, samples: int, temperature: float) -> dict[str, Any]:
+def sampled_report(
+    run: str, on: str, samples: int, temperature: float, candidates: int = 0, steps: int | None = None
+) -> dict[str, Any]:
     """The ``sampled`` measurement: per scenario of ``on`` the best (least energy, reaching the goal)
     of one run's mode and ``samples`` episodes drawn from its logits, seeded by the scenario's
-    position in the set; ``episodes`` holds the best, ``greedy`` the mode's."""
+    position in the set; ``episodes`` holds the best, ``greedy`` the mode's. With ``candidates`` > 0
+    the ``rollout`` measurement instead: the mode improved by one-step lookahead over that many
+    actions per step, the first ``steps`` steps (:func:`baselines.imitation.rollout_improved`)."""
     from baselines.agents import PPOAgent
     from baselines.evaluation import episode_regret, make_env, ppo_env_kwargs, resolve_scenario
-    from baselines.imitation import best_reached, sampled_episodes
+    from baselines.imitation import best_reached, rollout_improved, sampled_episodes
     from baselines.reference import load_references
 
     names, ref_dir = SETS[on]
@@ -373,22 +382,25 @@ def sampled_report(run: str, on: str, samples: int, temperature: float) -> dict[
         rec = {"scenario": name, "success": ep["success"], "energy_spent": ep["energy_spent"], "env_id": agent.env_id}
         return {**rec, "regret": episode_regret(rec, refs)}
 
-    best_rows, greedy_rows = [], []
+    best_rows, greedy_rows, tried = [], [], 0
     for k, name in enumerate(names):
-        eps = sampled_episodes(
-            env, agent.logits, resolve_scenario(name, {}), samples=samples, temperature=temperature, seed=k
-        )
-        best_rows.append(row(name, best_reached(eps)))
-        greedy_rows.append(row(name, eps[0]))
+        sc = resolve_scenario(name, {})
+        best: dict[str, Any] | None
+        if candidates > 0:
+            greedy, best = rollout_improved(env, agent.logits, sc, candidates=candidates, steps=steps)
+            tried += best["tried"]
+        else:
+            eps = sampled_episodes(env, agent.logits, sc, samples=samples, temperature=temperature, seed=k)
+            greedy, best = eps[0], best_reached(eps)
+        best_rows.append(row(name, best))
+        greedy_rows.append(row(name, greedy))
     env.close()
-    return {
-        "on": on,
-        "run": str(_run_dir(run)),
-        "samples": samples,
-        "temperature": temperature,
-        "episodes": best_rows,
-        "greedy": greedy_rows,
-    }
+    method = (
+        {"candidates": candidates, "steps": steps, "episodes_flown": tried}
+        if candidates > 0
+        else {"samples": samples, "temperature": temperature}
+    )
+    return {"on": on, "run": str(_run_dir(run)), **method, "episodes": best_rows, "greedy": greedy_rows}
 
 
 def regret_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
@@ -408,7 +420,7 @@ def regret_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point; returns the exit status."""
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("mode", choices=("fit", "demonstrator", "consistency", "ensemble", "sampled"))
+    p.add_argument("mode", choices=("fit", "demonstrator", "consistency", "ensemble", "sampled", "rollout"))
     p.add_argument("--runs", nargs="+", default=[], help="successor-policy runs (fit: each; ensemble: together)")
     p.add_argument("--demos", default="results/reference-train-prim-t1", help="fit: the demonstrations' folder")
     p.add_argument(
@@ -419,6 +431,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument("--samples", type=int, default=60, help="consistency: states to plan again from; sampled: episodes")
     p.add_argument("--temperature", type=float, default=1.0, help="sampled: of the logits (default 1)")
+    p.add_argument("--candidates", type=int, default=8, help="rollout: actions tried per step (default 8)")
+    p.add_argument("--steps", type=int, default=None, help="rollout: decide only the first N steps (default all)")
     p.add_argument("--lead", type=int, default=0, help="ensemble: the first N steps from the demonstrator's plans")
     p.add_argument("--plans", default=None, help="ensemble with --lead: a demonstrator run's plans folder")
     p.add_argument(
@@ -436,7 +450,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument("--no-progress", action="store_true")
     args = p.parse_args(argv)
-    check_cli_args(p, args, counts=("beam_width", "workers", "samples"))
+    check_cli_args(p, args, counts=("beam_width", "workers", "samples", "candidates"))
     if args.lead < 0:
         p.error(f"--lead={args.lead!r} must be >= 0 (steps)")
     searches = args.mode in ("demonstrator", "consistency")
@@ -446,6 +460,10 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"{args.mode} needs --out (a folder) and a --time-weight >= 0")
     if args.mode == "sampled" and (len(args.runs) != 1 or not 0.0 < args.temperature < float("inf")):
         p.error(f"sampled needs one run (got {len(args.runs)}) and a --temperature > 0 (got {args.temperature})")
+    if args.mode == "rollout" and len(args.runs) != 1:
+        p.error(f"rollout needs one run (got {len(args.runs)})")
+    if args.steps is not None and args.steps < 0:
+        p.error(f"--steps={args.steps!r} must be >= 0 (steps decided by lookahead)")
     if searches:
         check_cli_args(p, args, dirs=("out",))
     elif args.out is not None and args.out.is_dir():
@@ -488,8 +506,15 @@ def main(argv: list[str] | None = None) -> int:
                 f"{c['cheaper_by_more_than_5']}, dearer at {c['dearer_by_more_than_5']}; another primitive "
                 f"within 5 J/kg at {c['other_primitive_within_5']}"
             )
-        elif args.mode == "sampled":
-            res = sampled_report(args.runs[0], args.on, args.samples, args.temperature)
+        elif args.mode in ("sampled", "rollout"):
+            res = sampled_report(
+                args.runs[0],
+                args.on,
+                args.samples,
+                args.temperature,
+                args.candidates if args.mode == "rollout" else 0,
+                args.steps,
+            )
             g = regret_summary(res["greedy"])
             print(f"the mode alone on {args.on}: regret median {g['median']:.3f}, {g['at_most_0.6']} at most 0.6")
         else:

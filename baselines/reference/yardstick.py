@@ -56,6 +56,10 @@ class SamplerReference:
         policy visited (DAgger) starts with the policy's own steps, flown to reach that state.
     :param env_kwargs: a task's own search: the ``gym.make`` keywords of the env it planned in
         (its control interval, envelope, step limit; empty: the id's defaults), which a replay needs.
+    :param candidate_costs: a plan improved by lookahead (:func:`baselines.imitation.rollout_improved`):
+        per step of ``actions`` the ``[action, energy]`` pairs of the actions tried there, each
+        followed by the policy's mode to the end [J/kg] (None: that episode missed the goal); empty
+        lists where nothing was tried, and an empty list for a searched plan.
     """
 
     best_cost: float
@@ -68,9 +72,19 @@ class SamplerReference:
     seconds: float
     demo_from: int = 0
     env_kwargs: dict[str, Any] = dataclasses.field(default_factory=dict)
+    candidate_costs: list[list[list[Any]]] = dataclasses.field(default_factory=list)
 
     def regret(self, cost: float) -> float:
         return regret(cost, self.best_cost, self.direct_cost)
+
+
+def _sampler_dict(ref: SamplerReference) -> dict[str, Any]:
+    """``ref`` as JSON-ready data; ``candidate_costs`` only where there are some (searched plans'
+    files stay as they were before the field existed)."""
+    d = dataclasses.asdict(ref)
+    if not d["candidate_costs"]:
+        del d["candidate_costs"]
+    return d
 
 
 @dataclass(frozen=True)
@@ -91,7 +105,7 @@ class ScenarioReference:
             "schema": SCHEMA,
             "scenario": self.scenario.to_dict(),
             "lower_bound": self.lower_bound,
-            "samplers": {k: dataclasses.asdict(v) for k, v in self.samplers.items()},
+            "samplers": {k: _sampler_dict(v) for k, v in self.samplers.items()},
         }
 
     @classmethod
