@@ -153,6 +153,7 @@ def demonstrations(
         if ref is None or not math.isfinite(ref.best_cost) or not ref.actions:
             continue
         env = make_env(refs[name].scenario)
+        n_actions = int(getattr(env.action_space, "n", 0))  # the primitives (soft targets only)
         try:
             obs, _ = env.reset(seed=0)
             rewards: list[float] = []
@@ -174,7 +175,6 @@ def demonstrations(
                     act_rows.append(u)
                     if soft_temperature > 0.0:
                         tried = ref.candidate_costs[k] if k < len(ref.candidate_costs) else []
-                        n_actions = int(getattr(env.action_space, "n", 0))
                         t_rows.append(_soft_target(n_actions, int(u), tried, soft_temperature))
                 obs, r, terminated, truncated, info = env.step(u)
                 rewards.append(float(r))
@@ -655,16 +655,17 @@ def best_reached(episodes: Sequence[dict[str, Any]]) -> dict[str, Any] | None:
 
 
 def _label_log_prob(lp: Any, act: Any, accepted: Any, targets: Any, idx: Any) -> Any:
-    """Per row of a minibatch, the log-likelihood :func:`pretrain` maximises, from the policy's
-    log-probabilities ``lp``: of the demonstrated action, of the accepted set (the log of its summed
-    probability), or the expectation under the row's target distribution (a cross-entropy)."""
+    """Per row ``idx`` of a minibatch, the log-likelihood :func:`pretrain` maximises, from the
+    policy's log-probabilities ``lp`` of those rows: of the demonstrated action (``act``), of the
+    accepted set (the log of its summed probability), or the expectation under the row's target
+    distribution (a cross-entropy). ``act``, ``accepted`` and ``targets`` hold every row."""
     import torch
 
     if accepted is not None:
         return torch.logsumexp(lp.masked_fill(~accepted[idx], -math.inf), dim=1)
     if targets is not None:
         return (targets[idx] * lp).sum(dim=1)
-    return lp.gather(1, act.long()[:, None]).squeeze(1)
+    return lp.gather(1, act[idx].long()[:, None]).squeeze(1)
 
 
 def pretrain(
@@ -767,13 +768,13 @@ def pretrain(
                 feats = policy.extract_features(obs[idx], policy.pi_features_extractor)
                 raw = policy.action_net(policy.mlp_extractor.forward_actor(feats))
                 values = policy.predict_values(obs[idx])
-                log_prob = _label_log_prob(torch.log_softmax(raw, dim=1), act[idx], accepted, targets, idx)
+                log_prob = _label_log_prob(torch.log_softmax(raw, dim=1), act, accepted, targets, idx)
             elif accepted is None and targets is None:
                 values, log_prob, _ = policy.evaluate_actions(obs[idx], act[idx])
             else:  # Categorical's logits are log-probabilities
                 values = policy.predict_values(obs[idx])
                 lp = policy.get_distribution(obs[idx]).distribution.logits
-                log_prob = _label_log_prob(lp, act[idx], accepted, targets, idx)
+                log_prob = _label_log_prob(lp, act, accepted, targets, idx)
             sq = (values.flatten() - ret[idx]) ** 2
             if wts is None:
                 nll, vloss = -log_prob.mean(), torch.mean(sq)

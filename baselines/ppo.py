@@ -186,8 +186,8 @@ class TrainConfig:
         ``--every``). 1 (default): every row alike.
     :param demo_start_weight: the weight of each plan's row at the scenario's start (a plan flown
         from time 0, not a DAgger plan): the first decision, which picks the thermal a flight heads
-        for (README, round fourteen: a lookahead at that step alone halves the clone's regret), is
-        one row in a plan's seven or so. 1 (default): every row alike.
+        for (README, round fourteen: a lookahead at that step alone closes half the gap to a
+        lookahead at every step), is one row in a plan's seven or so. 1 (default): every row alike.
     :param demo_epochs: passes of the behaviour cloning over the demonstrations (0: none, e.g. to
         rehearse the demonstrations of a policy that ``init_from`` cloned before).
     :param demo_learning_rate: Adam step size of the behaviour cloning.

@@ -32,7 +32,8 @@ Measurements for the successor policies of ``scripts/train_ppo.py --algo discret
 * ``rollout`` (round fourteen): one run's mode improved by one-step lookahead
   (:func:`baselines.imitation.rollout_improved`): at each step (the first ``--steps``) each of the
   ``--candidates`` primitives of largest logit is tried, the mode flying on, and the cheapest kept.
-  Also not an agent: the policy-improvement step that ``scripts/demos.py --improve`` clones from.
+  Also not an agent: the policy-improvement step that ``scripts/demos.py --self-imitate RUN
+  --lookahead C`` clones from.
 
 Scenario sets (``--on``): ``val`` = ``random-5000 ... 5019`` against ``results/reference-val``
 (narrow primitive references, made for this round), ``h21`` = ``paper`` + ``random-10000 ...
