@@ -638,9 +638,7 @@ def rollout_improved(
             ep = _fly_mode(env, logits, scenario, [*prefix, a], candidates)
             tried += 1
             here.append((a, cost(ep)))
-            if key(ep) < key(best):
-                # the shared prefix keeps its candidates: later steps are decided along the new episode
-                ep["options"][:t] = best["options"][:t]
+            if key(ep) < key(best):  # later steps are decided along the new episode
                 best = ep
         costs.append(here)
         t += 1
