@@ -23,6 +23,7 @@ from baselines.ppo import (
     DISCRETE_ID,
     TrainConfig,
     inverse_turn_curve,
+    load_model,
     make_eval_env,
     train,
     turn_curve,
@@ -538,6 +539,28 @@ def test_train_with_demos_saves_the_cloned_start(ref_dir: Path, tmp_path: Path) 
                 TrainConfig(demos=str(ref_dir), **{field: bad})
     with pytest.raises(ValueError, match="demo_epochs"):
         TrainConfig(demo_epochs=-1)
+
+
+def test_cloning_on_two_torch_threads_is_deterministic(ref_dir: Path, tmp_path: Path) -> None:
+    """``torch_threads=2`` (the cloning on an idle 2-core machine): two runs give the same losses
+    and the same weights bit for bit; the thread count is validated."""
+    import torch
+
+    before = torch.get_num_threads()
+    try:
+        kw = {"policy": "successor", "scorer_hidden": (8,), "demo_epochs": 3, "torch_threads": 2}
+        config = dataclasses.replace(_tiny_run("discrete", ref_dir, **kw), total_timesteps=0)
+        runs = [train(config, tmp_path / f"run{k}") for k in (0, 1)]
+        assert torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(before)
+    bc = [json.loads((r / "config.json").read_text())["behaviour_cloning"] for r in runs]
+    assert bc[0]["first_epoch"] == bc[1]["first_epoch"] and bc[0]["last_epoch"] == bc[1]["last_epoch"]
+    weights = [load_model(r / "model.zip", "discrete").policy.state_dict() for r in runs]
+    assert all(torch.equal(weights[0][k], weights[1][k]) for k in weights[0])
+    for bad in (0, -1, 1.5, True, "2", 65):
+        with pytest.raises(ValueError, match="torch_threads"):
+            TrainConfig(torch_threads=bad)  # type: ignore[arg-type]
 
 
 def test_control_grid_is_the_reference_control_set_and_indexes_back() -> None:
