@@ -291,6 +291,14 @@ def test_soft_targets_weigh_the_tried_primitives_by_their_energy(ref_dir: Path, 
     )
     assert load_reference(tmp_path / f"{name}.json").samplers["primitive"].candidate_costs == tried
     assert "candidate_costs" not in json.loads((ref_dir / f"{name}.json").read_text())["samplers"]["primitive"]
+    # a hand-edited file: strings, a missing energy, a step too few -> a ConfigError naming the file
+    for bad in ([[["3", 1000.0]], *tried[1:]], [[[3]], *tried[1:]], [[[3, "1000"]], *tried[1:]], tried[:-1]):
+        edited = json.loads((tmp_path / f"{name}.json").read_text())
+        edited["samplers"]["primitive"]["candidate_costs"] = bad
+        (tmp_path / "edited.json").write_text(json.dumps(edited))
+        with pytest.raises(ConfigError, match=r"edited\.json.*candidate_costs must hold"):
+            load_reference(tmp_path / "edited.json")
+    (tmp_path / "edited.json").unlink()
     d = demonstrations(tmp_path, _env(DISCRETE_ID), sampler="primitive", gamma=1.0, soft_temperature=t)
     assert d.targets is not None and d.targets.shape == (len(flown), 174) and d.targets.dtype == np.float32
     want = np.zeros(174)

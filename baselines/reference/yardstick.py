@@ -87,6 +87,34 @@ def _sampler_dict(ref: SamplerReference) -> dict[str, Any]:
     return d
 
 
+def _is_pair(p: Any) -> bool:
+    """An ``[action, energy]`` pair of ``candidate_costs``: an integer action and a number or None."""
+    return (
+        isinstance(p, list)
+        and len(p) == 2
+        and isinstance(p[0], int)
+        and not isinstance(p[0], bool)
+        and (p[1] is None or (isinstance(p[1], (int, float)) and not isinstance(p[1], bool)))
+    )
+
+
+def _sampler_from_dict(v: Mapping[str, Any], source: str) -> SamplerReference:
+    """One sampler's entry of a reference file; malformed ``candidate_costs`` (hand-edited files)
+    raise a ConfigError naming the file, not an error deep inside a cloning."""
+    ref = SamplerReference(**v)
+    cc = ref.candidate_costs
+    if cc and not (
+        isinstance(cc, list)
+        and len(cc) == len(ref.actions)
+        and all(isinstance(step, list) and all(_is_pair(q) for q in step) for step in cc)
+    ):
+        raise ConfigError(
+            f"{source}: candidate_costs must hold, per step of its {len(ref.actions)} actions, a list of "
+            f"[action (integer), energy (number or null)] pairs; got {str(cc)[:80]!r}"
+        )
+    return ref
+
+
 @dataclass(frozen=True)
 class ScenarioReference:
     """Bounds and references of one scenario (the content of one ``results/reference/*.json``)."""
@@ -116,7 +144,7 @@ class ScenarioReference:
             return cls(
                 scenario=Scenario.from_dict(d["scenario"]),
                 lower_bound=float(d["lower_bound"]),
-                samplers={k: SamplerReference(**v) for k, v in d["samplers"].items()},
+                samplers={k: _sampler_from_dict(v, f"{source}, sampler {k!r}") for k, v in d["samplers"].items()},
             )
         except (KeyError, TypeError, AttributeError) as exc:
             raise ConfigError(f"{source} is not a reference file: {exc!r}") from None
