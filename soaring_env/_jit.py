@@ -20,11 +20,17 @@ import hashlib
 import os
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 #: LLVM fast-math flags: contraction (FMA), reciprocal and reassociation only. Never ``nnan`` /
 #: ``ninf``: the kernels test for NaN (e.g. "no previous airspeed") and must keep IEEE semantics there.
 FASTMATH = {"contract", "arcp", "reassoc"}
+
+#: numba's error model for every kernel of soaring_env: "numpy" makes ``a / b`` the plain IEEE division.
+#: The default ("python") tests every divisor for zero to raise ZeroDivisionError, and that branch keeps
+#: LLVM from vectorizing any loop that divides. The kernels guard their divisors themselves (validated
+#: positive scales, durations and radii); a zero divisor gives inf, never an exception.
+ERROR_MODEL: Literal["numpy"] = "numpy"
 
 #: Top-level packages whose kernels get the package-wide cache key.
 KERNEL_PACKAGES = ("soaring_env", "baselines")

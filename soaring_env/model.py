@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from soaring_env._jit import ERROR_MODEL as _EM
 from soaring_env._validation import (
     ConfigError,
     as_float_array,
@@ -64,7 +65,7 @@ def classify_params(scenario: Scenario) -> np.ndarray:
     return np.array([gn, ge, gh, gr, bd.north_min, bd.north_max, bd.east_min, bd.east_max, bd.height_max])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model=_EM)
 def classify_row(s: np.ndarray, b: int, prm: np.ndarray) -> tuple[int, int]:
     """First event along edge ``b`` of ``s`` (B, N, 4): (outcome code, output point index).
 
@@ -91,7 +92,7 @@ def classify_row(s: np.ndarray, b: int, prm: np.ndarray) -> tuple[int, int]:
     return FLYING, n_pts - 1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model=_EM)
 def classify_batch(s: np.ndarray, prm: np.ndarray, codes: np.ndarray, ks: np.ndarray) -> None:
     """:func:`classify_row` for every edge b of ``s`` with its row ``prm[b]``, into ``codes``, ``ks``."""
     for b in range(s.shape[0]):

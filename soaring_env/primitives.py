@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
+from soaring_env._jit import ERROR_MODEL as _EM
 from soaring_env._jit import FASTMATH as _FM
 from soaring_env._threads import SERIAL, RowThreads
 from soaring_env._validation import (
@@ -34,7 +35,17 @@ from soaring_env._validation import (
     check_type,
 )
 from soaring_env.physics.aircraft import _AC_ETA, _AC_MASS, _AC_MODEL, Aircraft, _thrust_at, _thrust_coeffs
-from soaring_env.physics.atmosphere import LAPSE, MAX_HEIGHT, T0, G, _density, _density_near
+from soaring_env.physics.atmosphere import (
+    DENSITY_SERIES_MAX_X,
+    LAPSE,
+    MAX_HEIGHT,
+    T0,
+    G,
+    _density,
+    _density_near,
+    density_offset,
+    density_series,
+)
 from soaring_env.physics.thermals import (
     _GAUSSIAN,
     COL_PEAK,
@@ -608,7 +619,7 @@ def _default_library() -> PrimitiveLibrary:
     return _DEFAULT_LIBRARY[0]
 
 
-@njit(cache=True, inline="always", fastmath=_FM)
+@njit(cache=True, inline="always", fastmath=_FM, error_model=_EM)
 def _advance(n, e, c, s, u, om, tau, cd, sd, wn, we):
     """Exact arc (or line) of horizontal air speed u and turn rate om over tau, plus wind drift.
 
@@ -627,7 +638,27 @@ def _advance(n, e, c, s, u, om, tau, cd, sd, wn, we):
     return n2, e2, c2, s2
 
 
-@njit(cache=True, fastmath=_FM, nogil=True)
+@njit(cache=True, inline="always", fastmath=_FM, error_model=_EM)
+def _thrust_trapezoid(hb, fb, lo, hi, kt, tmodel, h_ref, rho_ref, theta_ref, series_ok):
+    """Sum over the intervals ``lo .. hi - 1`` of the mean thrust [N] at their ends ``hb[i]``,
+    ``hb[i + 1]`` [m] (the trapezoid rule without its dt); ``fb`` is scratch. ``series_ok``: every
+    height is near enough to ``h_ref`` for :func:`density_series`, whose loop (unlike the power
+    function's) vectorizes."""
+    if hi <= lo:  # no interval (a one-point edge's empty first segment)
+        return 0.0
+    if series_ok:
+        for i in range(lo, hi + 1):
+            fb[i] = _thrust_at(density_series(density_offset(hb[i], h_ref, theta_ref), rho_ref), kt, tmodel)
+    else:
+        for i in range(lo, hi + 1):
+            fb[i] = _thrust_at(_density_near(hb[i], h_ref, rho_ref, theta_ref), kt, tmodel)
+    total = 0.5 * (fb[lo] + fb[hi])
+    for i in range(lo + 1, hi):
+        total += fb[i]
+    return total
+
+
+@njit(cache=True, fastmath=_FM, nogil=True, error_model=_EM)
 def _rollout_kernel(
     x0, t0, ctrl, v_prev, fidx, dur, n_pts, k_switch, max_substep, th_all, nth_all, fpar, ac, out, terms
 ):
@@ -639,6 +670,9 @@ def _rollout_kernel(
     two_pi = 2.0 * math.pi
     infl = np.empty(th_all.shape[1])
     cand = np.empty(th_all.shape[1], dtype=np.int64)
+    hb = np.empty(n_pts + 1)  # heights of the start and of the points [m]
+    fb = np.empty(n_pts + 1)  # thrust [N] at them
+    cb = np.empty(n_pts)  # courses at the points [rad]
     fld_prev = -1
     th = th_all[0, :0]
     nth = model = 0
@@ -693,26 +727,29 @@ def _rollout_kernel(
                 cand[n_cand] = j
                 n_cand += 1
         max_bank = 0.0
-        fuel = 0.0
-        min_h = h
-        f_prev = 0.0
         om = cd = sd = ch = sh = 0.0
-        kt = (0.0, 0.0, 0.0, 0.0)
         g0 = 0.0
         g0_ok = False
+        two_seg = ctrl[b, 3] != ctrl[b, 2]
+        # Courses in closed form, into a contiguous buffer (a loop that vectorizes; out's stride does not).
+        w1 = ctrl[b, 2]
+        w2 = ctrl[b, 3]
         for k in range(n_pts):
-            # A second segment that turns at the first one's rate needs none of this again: the
-            # same inputs give the same values (and f_prev is the thrust the last point computed).
-            if k == 0 or (k == k_switch and ctrl[b, 3] != ctrl[b, 2]):
+            chi_k = x0[b, 2] + (w1 * min(k + 1, k_switch) + w2 * max(0, k + 1 - k_switch)) * dt
+            chi_k -= two_pi * math.floor((chi_k + math.pi) / two_pi)
+            if chi_k >= math.pi:  # rounding can land exactly on +pi
+                chi_k -= two_pi
+            cb[k] = chi_k
+        hb[0] = h
+        for k in range(n_pts):
+            # A second segment that turns at the first one's rate needs none of this again.
+            if k == 0 or (k == k_switch and two_seg):
                 om = ctrl[b, 2] if k < k_switch else ctrl[b, 3]
                 cd = math.cos(om * dt)
                 sd = math.sin(om * dt)
                 ch = math.cos(0.5 * om * hs)
                 sh = math.sin(0.5 * om * hs)
-                tan_phi = v * om / G
-                max_bank = max(max_bank, abs(math.atan(tan_phi)))
-                kt = _thrust_coeffs(v, gam, 1.0 / math.sqrt(1.0 + tan_phi * tan_phi), ac)
-                f_prev = _thrust_at(_density_near(h, h_start, rho_start, theta_start), kt, tmodel) * v / mass_eta
+                max_bank = max(max_bank, abs(math.atan(v * om / G)))
             t_start = t0[b] + k * dt
             n1, e1, c1, s1 = _advance(n, e, c, s, u, om, dt, cd, sd, wn, we)
             near = False
@@ -751,20 +788,32 @@ def _rollout_kernel(
             else:
                 g0_ok = False
                 h1 = h + climb * dt
-            chi_k = x0[b, 2] + (ctrl[b, 2] * min(k + 1, k_switch) + ctrl[b, 3] * max(0, k + 1 - k_switch)) * dt
             out[b, k, 0] = n1
             out[b, k, 1] = e1
-            chi_k -= two_pi * math.floor((chi_k + math.pi) / two_pi)
-            if chi_k >= math.pi:  # rounding can land exactly on +pi
-                chi_k -= two_pi
-            out[b, k, 2] = chi_k
+            out[b, k, 2] = cb[k]
             out[b, k, 3] = h1
-            f1 = _thrust_at(_density_near(h1, h_start, rho_start, theta_start), kt, tmodel) * v / mass_eta
-            fuel += 0.5 * (f_prev + f1) * dt
-            f_prev = f1
-            if h1 < min_h:
-                min_h = h1
+            hb[k + 1] = h1
             n, e, c, s, h = n1, e1, c1, s1, h1
+        # The rest has no serial dependency from point to point: loops the compiler vectorizes.
+        min_h = hb[0]
+        max_h = hb[0]
+        for k in range(1, n_pts + 1):
+            min_h = min(min_h, hb[k])
+            max_h = max(max_h, hb[k])
+        series = max(abs(density_offset(min_h, h_start, theta_start)), abs(density_offset(max_h, h_start, theta_start)))
+        series_ok = series <= DENSITY_SERIES_MAX_X
+        # Propulsive energy: the trapezoid rule over the points, with each control segment's own
+        # thrust (a second segment starts at the first one's last point).
+        k_seg = k_switch if two_seg else n_pts
+        tan_phi = v * ctrl[b, 2] / G
+        kt = _thrust_coeffs(v, gam, 1.0 / math.sqrt(1.0 + tan_phi * tan_phi), ac)
+        fuel = _thrust_trapezoid(hb, fb, 0, k_seg, kt, tmodel, h_start, rho_start, theta_start, series_ok)
+        if two_seg:
+            tan_phi = v * ctrl[b, 3] / G
+            kt = _thrust_coeffs(v, gam, 1.0 / math.sqrt(1.0 + tan_phi * tan_phi), ac)
+            fuel += _thrust_trapezoid(hb, fb, k_seg, n_pts, kt, tmodel, h_start, rho_start, theta_start, series_ok)
+        fuel *= dt * v / mass_eta
+        h = hb[n_pts]
         kinetic = 0.0
         vp = v_prev[b]
         if vp == vp and v > vp:  # NaN-safe: no previous edge charges nothing

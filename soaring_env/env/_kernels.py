@@ -14,12 +14,13 @@ import math
 import numpy as np
 from numba import njit
 
+from soaring_env._jit import ERROR_MODEL as _EM
 from soaring_env.env.observation import goal_distance, observe_row
 from soaring_env.model import CRASH, FLYING, GOAL, OUT_OF_BOUNDS, classify_batch, classify_row
 from soaring_env.primitives import _rollout_kernel
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model=_EM)
 def post_step(
     out: np.ndarray,
     x0: np.ndarray,
@@ -85,7 +86,7 @@ def post_step(
         )
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model=_EM)
 def step_rows(
     skip: np.ndarray,
     x0: np.ndarray,

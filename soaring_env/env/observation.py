@@ -43,6 +43,7 @@ import math
 import numpy as np
 from numba import njit
 
+from soaring_env._jit import ERROR_MODEL as _EM
 from soaring_env.model import N_CLASSIFY_PARAMS, classify_params
 from soaring_env.physics.thermals import _GAUSSIAN, COL_DYNAMIC, _r1_over_r2, row_absent, row_factor, updraft_at
 from soaring_env.primitives import FP_DRIFT_EAST, FP_WIND_NORTH, field_params
@@ -117,12 +118,12 @@ def scenario_params(sc: Scenario) -> np.ndarray:
     return np.concatenate([classify_params(sc), field_params(sc.field)])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model=_EM)
 def _clip(v: float, lo: float, hi: float) -> float:
     return min(max(v, lo), hi)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model=_EM)
 def _allen_profile(h: float, zi: float) -> tuple[float, float, float]:
     """Allen's profile at height h for w* = 1: (w_peak [m/s], r2 [m]) and 0 < h < zi as 1.0/0.0."""
     zz = min(max(h / zi, 0.0), 1.0)
@@ -136,7 +137,7 @@ def _allen_profile(h: float, zi: float) -> tuple[float, float, float]:
     return max(w_peak, 0.0), r2, 1.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model=_EM)
 def observe_row(
     n: float,
     e: float,
@@ -247,7 +248,7 @@ def observe_row(
     return w
 
 
-@njit(cache=True)
+@njit(cache=True, error_model=_EM)
 def goal_distance(n: float, e: float, h: float, prm: np.ndarray) -> float:
     """3-D distance [m] to the goal centre, evaluated like ``GoalRegion.distance``."""
     dn = n - prm[P_GN]
@@ -256,7 +257,7 @@ def goal_distance(n: float, e: float, h: float, prm: np.ndarray) -> float:
     return math.sqrt(dn * dn + de * de + dh * dh)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model=_EM)
 def observe_batch(
     states: np.ndarray,
     times: np.ndarray,

@@ -49,6 +49,7 @@ from numba import njit
 from numba.typed import List
 
 from soaring_env import _jit  # noqa: F401  (the package-wide kernel cache key, before any kernel)
+from soaring_env._jit import ERROR_MODEL as _EM
 from soaring_env._validation import ConfigError, check_int, check_type
 from soaring_env.env.observation import (
     N_PARAMS,
@@ -171,7 +172,7 @@ def _range_row(spec: RandomScenarioSpec) -> np.ndarray:
     return row
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model=_EM)
 def _draw_row(
     g: Any,
     i: int,
@@ -254,7 +255,7 @@ def _draw_row(
     return False
 
 
-@njit(cache=True)
+@njit(cache=True, error_model=_EM)
 def _draw_each(rows, gens, r, n_lo, n_hi, drift, max_tries, prm_t, th_t, prm, th, nth, start) -> int:
     """Row ``i`` of ``rows`` from generator ``gens[i]`` (a typed List); -1, or the row that failed."""
     x = np.empty(_HEAD + _PER_THERMAL * n_hi)
@@ -264,7 +265,7 @@ def _draw_each(rows, gens, r, n_lo, n_hi, drift, max_tries, prm_t, th_t, prm, th
     return -1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model=_EM)
 def _draw_from(rows, g, r, n_lo, n_hi, drift, max_tries, prm_t, th_t, prm, th, nth, start) -> int:
     """Every row of ``rows``, in order, from the one generator ``g``; -1, or the row that failed."""
     x = np.empty(_HEAD + _PER_THERMAL * n_hi)
@@ -274,7 +275,7 @@ def _draw_from(rows, g, r, n_lo, n_hi, drift, max_tries, prm_t, th_t, prm, th, n
     return -1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model=_EM)
 def _generator_list(g: Any, n: int) -> Any:
     out = List()
     for _ in range(n):
@@ -282,7 +283,7 @@ def _generator_list(g: Any, n: int) -> Any:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, error_model=_EM)
 def _set_generator(gens: Any, i: int, g: Any) -> None:
     gens[i] = g
 
@@ -461,7 +462,7 @@ def _settings_row(s: GeneratorSettings) -> np.ndarray:
     return row
 
 
-@njit(cache=True)
+@njit(cache=True, error_model=_EM)
 def _draw_generated_row(
     g: Any,
     i: int,
@@ -597,7 +598,7 @@ def _draw_generated_row(
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model=_EM)
 def _draw_generated_each(rows, gens, kind, r, has_life, has_amp, drift, prm_t, th_t, prm, th, nth, start) -> int:
     """Row ``i`` of ``rows`` from generator ``gens[i]`` (a typed List); -1, or the row that failed."""
     for i in rows:

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from soaring_env._jit import ERROR_MODEL as _EM
 from soaring_env._jit import FASTMATH as _FM
 from soaring_env._validation import ConfigError, broadcast_flat, check_choice, check_positive, check_range, check_type
 from soaring_env.physics.atmosphere import MAX_HEIGHT, G, _density, air_density
@@ -215,7 +216,7 @@ def bank_angle(airspeed, chi_dot) -> np.ndarray:
 _AC_MASS, _AC_S, _AC_PIARE, _AC_CD0, _AC_CL0, _AC_ETA, _AC_MODEL = range(7)
 
 
-@njit(cache=True, inline="always", fastmath=_FM)
+@njit(cache=True, inline="always", fastmath=_FM, error_model=_EM)
 def _thrust_coeffs(v: float, gamma: float, cos_phi: float, ac: np.ndarray) -> tuple[float, float, float, float]:
     """Constants of the steady-flight thrust as a function of the air density rho.
 
@@ -239,7 +240,7 @@ def _thrust_coeffs(v: float, gamma: float, cos_phi: float, ac: np.ndarray) -> tu
     )
 
 
-@njit(cache=True, inline="always", fastmath=_FM)
+@njit(cache=True, inline="always", fastmath=_FM, error_model=_EM)
 def _thrust_at(rho: float, k: tuple[float, float, float, float], model: float) -> float:
     """Thrust [N] from :func:`_thrust_coeffs`, clipped at zero (no regeneration)."""
     if model == 0.0:
@@ -251,13 +252,13 @@ def _thrust_at(rho: float, k: tuple[float, float, float, float], model: float) -
     return t if t > 0.0 else 0.0
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, error_model=_EM)
 def _thrust(v: float, gamma: float, cos_phi: float, h: float, ac: np.ndarray) -> float:
     """Steady-flight thrust [N], clipped at zero; see :meth:`Aircraft.thrust`."""
     return _thrust_at(_density(h), _thrust_coeffs(v, gamma, cos_phi, ac), ac[_AC_MODEL])
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, error_model=_EM)
 def _glide_angles(v: np.ndarray, chi_dot: np.ndarray, h_max: float, ac: np.ndarray, out: np.ndarray) -> None:
     """Kernel of :meth:`Aircraft.glide_angle` (writes ``out``). Its thrust is the same expression as
     :meth:`Aircraft.thrust`'s, compiled in another context: the two agree to about 1e-16 N."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from soaring_env._jit import ERROR_MODEL as _EM
 from soaring_env._jit import FASTMATH as _FM
 
 #: Standard gravity [m/s^2] (ISO 80000-3).
@@ -19,7 +20,7 @@ ISA_EXPONENT = 4.2559
 MAX_HEIGHT = 11000.0
 
 
-@njit(cache=True, inline="always", fastmath=_FM)
+@njit(cache=True, inline="always", fastmath=_FM, error_model=_EM)
 def _density(h: float) -> float:
     return RHO0 * (1.0 - LAPSE * h / T0) ** ISA_EXPONENT
 
@@ -33,25 +34,37 @@ def _binomial_coefficients(n: float, degree: int) -> np.ndarray:
 
 #: Taylor coefficients of (1 + x)^ISA_EXPONENT up to x^7 (see :func:`_density_near`).
 _DENSITY_SERIES = _binomial_coefficients(ISA_EXPONENT, 7)
-_DENSITY_SERIES_MAX_X = 0.05
+#: Largest |x| = |L (h - h_ref) / (T0 theta_ref)| (about 2 km of height) :func:`density_series` serves.
+DENSITY_SERIES_MAX_X = 0.05
 
 
-@njit(cache=True, inline="always", fastmath=_FM)
-def _density_near(h: float, h_ref: float, rho_ref: float, theta_ref: float) -> float:
-    """ISA density at ``h`` from its value ``rho_ref`` at a nearby height ``h_ref``.
+@njit(cache=True, inline="always", fastmath=_FM, error_model=_EM)
+def density_offset(h: float, h_ref: float, theta_ref: float) -> float:
+    """``x = -L (h - h_ref) / (T0 theta_ref)``: the relative temperature change from ``h_ref`` to ``h``
+    [m], with ``theta_ref = 1 - L h_ref / T0``; ``rho(h) = rho(h_ref) (1 + x)^4.2559``."""
+    return -LAPSE * (h - h_ref) / (T0 * theta_ref)
 
-    ``rho(h) = rho_ref (1 + x)^4.2559`` with ``x = -L (h - h_ref) / (T0 theta_ref)``, summed as its
-    degree-7 binomial series when ``|x| <= 0.05`` (|h - h_ref| up to ~2 km): relative error below
-    4e-14, at a third of the cost of the power function the rollout would otherwise call per point.
-    """
-    x = -LAPSE * (h - h_ref) / (T0 * theta_ref)
-    if abs(x) > _DENSITY_SERIES_MAX_X:
-        return _density(h)
+
+@njit(cache=True, inline="always", fastmath=_FM, error_model=_EM)
+def density_series(x: float, rho_ref: float) -> float:
+    """``rho_ref (1 + x)^4.2559`` [kg/m^3] as its degree-7 binomial series, for
+    ``|x| <= DENSITY_SERIES_MAX_X``: relative error below 4e-14, at a third of the cost of the
+    power function, and a loop over many heights vectorizes (one over ``pow`` does not)."""
     c = _DENSITY_SERIES
     return rho_ref * (c[0] + x * (c[1] + x * (c[2] + x * (c[3] + x * (c[4] + x * (c[5] + x * (c[6] + x * c[7])))))))
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, inline="always", fastmath=_FM, error_model=_EM)
+def _density_near(h: float, h_ref: float, rho_ref: float, theta_ref: float) -> float:
+    """ISA density at ``h`` from its value ``rho_ref`` at a nearby height ``h_ref``:
+    :func:`density_series` where it holds (|h - h_ref| up to ~2 km), else the power function."""
+    x = density_offset(h, h_ref, theta_ref)
+    if abs(x) > DENSITY_SERIES_MAX_X:
+        return _density(h)
+    return density_series(x, rho_ref)
+
+
+@njit(cache=True, fastmath=_FM, error_model=_EM)
 def _density_many(h: np.ndarray, out: np.ndarray) -> None:
     for i in range(h.size):
         out.flat[i] = _density(h.flat[i])

@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
+from soaring_env._jit import ERROR_MODEL as _EM
 from soaring_env._jit import FASTMATH as _FM
 from soaring_env._validation import (
     ConfigError,
@@ -364,14 +365,14 @@ class WindField:
         return {"r2": r2, "r1": r1, "wbar": wbar, "w_peak": w_peak}
 
 
-@njit(cache=True, inline="always", fastmath=_FM)
+@njit(cache=True, inline="always", fastmath=_FM, error_model=_EM)
 def allen_reach(z: float, zi: float) -> float:
     """2 r2 at height ``z`` [m]: no Allen updraft or downdraft beyond it (r2 grows with z below zi)."""
     zz = min(max(z, 0.0), zi) / zi
     return 2.0 * max(10.0, 0.102 * _pow(zz, 1.0 / 3.0) * (1.0 - 0.25 * zz) * zi)
 
 
-@njit(cache=True, inline="always", fastmath=_FM)
+@njit(cache=True, inline="always", fastmath=_FM, error_model=_EM)
 def within_allen_reach(d: float, z: float, zi: float) -> bool:
     """``d < allen_reach(z, zi)`` for a distance ``d`` [m], decided without the cube root.
 
@@ -386,7 +387,7 @@ def within_allen_reach(d: float, z: float, zi: float) -> bool:
     return q * q * q < zz
 
 
-@njit(cache=True, inline="always", fastmath=_FM)
+@njit(cache=True, inline="always", fastmath=_FM, error_model=_EM)
 def _pow(x: float, y: float) -> float:
     """``x ** y`` for ``x >= 0`` as ``exp(y log x)``, relative error about ``|y ln x| 2^-53`` (< 1e-14
     for results between 1e-39 and 1e39) at about half the latency of libm's pow: the updraft sits on
@@ -394,17 +395,17 @@ def _pow(x: float, y: float) -> float:
     return math.exp(y * math.log(x))
 
 
-@njit(cache=True, inline="always", fastmath=_FM)
+@njit(cache=True, inline="always", fastmath=_FM, error_model=_EM)
 def _r1_over_r2(r2: float) -> float:
     return 0.0011 * r2 + 0.14 if r2 < 600.0 else 0.8
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, error_model=_EM)
 def _allen_shape() -> np.ndarray:
     return ALLEN_SHAPE
 
 
-@njit(cache=True, inline="always", fastmath=_FM)
+@njit(cache=True, inline="always", fastmath=_FM, error_model=_EM)
 def strength_factor(
     t: float, birth: float, death: float, rise: float, decay: float, amp: float, omega: float, phase: float
 ) -> float:
@@ -425,7 +426,7 @@ def strength_factor(
     return f
 
 
-@njit(cache=True, inline="always", fastmath=_FM)
+@njit(cache=True, inline="always", fastmath=_FM, error_model=_EM)
 def row_factor(th: np.ndarray, j: int, t: float) -> float:
     """:func:`strength_factor` of packed thermal row ``j`` at time ``t`` [s]."""
     return strength_factor(
@@ -440,13 +441,13 @@ def row_factor(th: np.ndarray, j: int, t: float) -> float:
     )
 
 
-@njit(cache=True, inline="always", fastmath=_FM)
+@njit(cache=True, inline="always", fastmath=_FM, error_model=_EM)
 def row_absent(th: np.ndarray, j: int, t: float) -> bool:
     """True if packed thermal row ``j`` is unborn or dead at time ``t`` [s] (steady rows: never)."""
     return th[j, COL_DYNAMIC] != 0.0 and not th[j, COL_BIRTH] < t < th[j, COL_DEATH]
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, error_model=_EM)
 def updraft_at(
     x: float, y: float, z: float, t: float, th: np.ndarray, model: int, zi: float, dvx: float, dvy: float
 ) -> float:
@@ -517,7 +518,7 @@ def updraft_at(
     return ws * w_peak + wd * wbar
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, error_model=_EM)
 def _updraft_many(n, e, h, t, th, model, zi, dvx, dvy, out) -> int:
     """``out[i]`` = the updraft at point i; returns -1, or the first i with a non-finite input
     (``out`` is then incomplete)."""
