@@ -615,9 +615,20 @@ def accepted_successors(
     from baselines._runs import progress_bar
 
     obs = np.asarray(observations, np.float64)
-    out = np.empty((len(obs), len(features.library)), bool)
+    acts = np.asarray(actions)
+    n_prim = len(features.library)
+    if obs.ndim != 2 or acts.shape != (len(obs),) or not np.issubdtype(acts.dtype, np.integer):
+        raise ConfigError(
+            f"accepted_successors: observations {obs.shape} and actions {acts.shape} ({acts.dtype}) must be "
+            "(N, D) rows and N integer primitive indices"
+        )
+    if acts.size and (acts.min() < 0 or acts.max() >= n_prim):
+        raise ConfigError(
+            f"accepted_successors: actions must lie in 0 ... {n_prim - 1}; got {acts.min()} ... {acts.max()}"
+        )
+    out = np.empty((len(obs), n_prim), bool)
     bar = progress_bar(len(obs), 0, progress, "near-equivalent successors", "row")
-    for k, (row, a) in enumerate(zip(obs, np.asarray(actions, np.int64), strict=True)):
+    for k, (row, a) in enumerate(zip(obs, acts.astype(np.int64), strict=True)):
         r = features.flown(row)
         out[k] = near_equivalent(r.states[None, :, -1, :], r.cost[None], np.array([a]))[0]
         if bar is not None:

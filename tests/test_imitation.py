@@ -291,8 +291,15 @@ def test_soft_targets_weigh_the_tried_primitives_by_their_energy(ref_dir: Path, 
     )
     assert load_reference(tmp_path / f"{name}.json").samplers["primitive"].candidate_costs == tried
     assert "candidate_costs" not in json.loads((ref_dir / f"{name}.json").read_text())["samplers"]["primitive"]
-    # a hand-edited file: strings, a missing energy, a step too few -> a ConfigError naming the file
-    for bad in ([[["3", 1000.0]], *tried[1:]], [[[3]], *tried[1:]], [[[3, "1000"]], *tried[1:]], tried[:-1]):
+    # a hand-edited file: strings, a missing energy, a step too few, no such primitive -> a ConfigError naming the file
+    for bad in (
+        [[["3", 1000.0]], *tried[1:]],
+        [[[3]], *tried[1:]],
+        [[[3, "1000"]], *tried[1:]],
+        tried[:-1],
+        [[[174, 1000.0]], *tried[1:]],
+        [[[-1, 1000.0]], *tried[1:]],
+    ):
         edited = json.loads((tmp_path / f"{name}.json").read_text())
         edited["samplers"]["primitive"]["candidate_costs"] = bad
         (tmp_path / "edited.json").write_text(json.dumps(edited))

@@ -384,6 +384,7 @@ def test_accepted_successors_are_the_near_equivalents_of_the_demonstrated_one() 
     primitives :func:`near_equivalent` finds among the edges flown from the observation; a
     straight primitive is not near a spiral."""
     from baselines.scoring import SuccessorFeatures, accepted_successors, near_equivalent, successor_kwargs
+    from soaring_env._validation import ConfigError
 
     env = gym.make(DISCRETE_ID, scenario="random")
     frame = BodyFrameObservation(env)
@@ -398,3 +399,7 @@ def test_accepted_successors_are_the_near_equivalents_of_the_demonstrated_one() 
     spiral = env.unwrapped.library.table[:, COL_FAMILY] == SPIRAL
     assert not acc[0, spiral].any()  # primitive 0 flies straight
     assert 1 < acc.sum() < 3 * 174
+    # mismatched rows, float or out-of-range actions: a ConfigError, not numpy's or zip's ValueError
+    for bad_obs, bad_act in ((obs, act[:2]), (obs, act + 0.5), (obs, np.array([0, 17, 174])), (obs[0], act[:1])):
+        with pytest.raises(ConfigError, match="accepted_successors"):
+            accepted_successors(feats, bad_obs, bad_act)

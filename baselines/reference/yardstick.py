@@ -34,6 +34,7 @@ from baselines.sst.planner import plan_soaring
 from baselines.sst.soaring import SAMPLERS
 from soaring_env._validation import ConfigError, check_choice, check_int
 from soaring_env.model import SoaringModel
+from soaring_env.primitives import N_PRIMITIVES
 from soaring_env.scenario import Scenario, atomic_write_text
 
 #: Version of the reference file layout.
@@ -88,12 +89,13 @@ def _sampler_dict(ref: SamplerReference) -> dict[str, Any]:
 
 
 def _is_pair(p: Any) -> bool:
-    """An ``[action, energy]`` pair of ``candidate_costs``: an integer action and a number or None."""
+    """An ``[action, energy]`` pair of ``candidate_costs``: a primitive index 0 ... 173 and a number or None."""
     return (
         isinstance(p, list)
         and len(p) == 2
         and isinstance(p[0], int)
         and not isinstance(p[0], bool)
+        and 0 <= p[0] < N_PRIMITIVES
         and (p[1] is None or (isinstance(p[1], (int, float)) and not isinstance(p[1], bool)))
     )
 
@@ -110,7 +112,7 @@ def _sampler_from_dict(v: Mapping[str, Any], source: str) -> SamplerReference:
     ):
         raise ConfigError(
             f"{source}: candidate_costs must hold, per step of its {len(ref.actions)} actions, a list of "
-            f"[action (integer), energy (number or null)] pairs; got {str(cc)[:80]!r}"
+            f"[action (integer 0 ... {N_PRIMITIVES - 1}), energy (number or null)] pairs; got {str(cc)[:80]!r}"
         )
     return ref
 
