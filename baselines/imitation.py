@@ -240,13 +240,19 @@ def _soft_target(n_actions: int, action: int, tried: Sequence[Sequence[Any]], te
 def _chosen(
     reference_dir: str | Path, names: Sequence[str] | None, match: str | None
 ) -> tuple[dict[str, ScenarioReference], list[str]]:
-    """The reference files of ``reference_dir`` and the names :func:`demonstrations` uses."""
-    refs = load_references(reference_dir)
-    if not refs:
+    """The reference files of ``reference_dir`` that :func:`demonstrations` uses (only those are
+    read) and their names."""
+    pattern = demo_pattern(match) if match is not None else None
+    wanted = None if names is None else set(names)
+
+    def select(name: str) -> bool:
+        return (wanted is None or name in wanted) and (pattern is None or pattern.fullmatch(name) is not None)
+
+    refs = load_references(reference_dir, select)
+    if not refs and not any(Path(reference_dir).glob("*.json")):
         raise ConfigError(f"demos={str(reference_dir)!r}: no reference files there (run scripts/reference.py)")
     chosen = sorted(refs) if names is None else list(names)
-    if match is not None:
-        pattern = demo_pattern(match)
+    if pattern is not None:
         chosen = [n for n in chosen if pattern.fullmatch(n)]
         if not chosen:
             raise ConfigError(f"demo_match={match!r}: no scenario in {str(reference_dir)!r} matches it")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import shutil
 from pathlib import Path
 from typing import Any
 
@@ -127,6 +128,14 @@ def test_demo_match_selects_the_files_by_scenario_name(ref_dir: Path, tmp_path: 
         TrainConfig(demos=str(ref_dir), demo_match="tiny-(")
     run = train(_tiny_run("grid", ref_dir, demo_epochs=1, demo_match="tiny-0"), tmp_path / "run")
     assert json.loads((run / "config.json").read_text())["behaviour_cloning"]["scenarios"] == ["tiny-0"]
+    # only the matching files are read: a broken one beside them stops only a cloning that takes it
+    shutil.copytree(ref_dir, tmp_path / "more")
+    (tmp_path / "more" / "other-0.json").write_text("{not json")
+    again = demonstrations(tmp_path / "more", make, sampler="continuous", gamma=0.99, match=r"tiny-1")
+    assert np.array_equal(again.observations, one.observations)
+    assert set(load_references(tmp_path / "more", lambda name: name != "other-0")) == {"tiny-0", "tiny-1"}
+    with pytest.raises(ConfigError, match=r"other-0\.json"):
+        demonstrations(tmp_path / "more", make, sampler="continuous", gamma=0.99)
 
 
 def test_other_dynamics_than_the_reference_are_refused(ref_dir: Path) -> None:
@@ -1352,6 +1361,23 @@ def test_diagnose_clone_fit_and_ensemble(
         with pytest.raises(SystemExit):
             dc.main(argv)
         assert msg in capsys.readouterr().err
+
+
+def test_diagnose_clone_sets_are_scored_alike() -> None:
+    """Every ``--on`` set of ``scripts/diagnose_clone.py`` has a published primitive reference for
+    each of its scenarios, and the validation set (where runs are chosen) was searched with the
+    held-out set's settings, so a regret means the same on both; the two share no scenario."""
+    from baselines.cli import diagnose_clone as dc
+
+    root = Path(__file__).resolve().parents[1]
+    settings_of = {}
+    for on, (names, ref_dir) in dc.SETS.items():
+        refs = load_references(root / ref_dir)
+        missing = [n for n in names if n not in refs or "primitive" not in refs[n].samplers]
+        assert not missing, f"{on}: no primitive reference for {missing[:3]}"
+        settings_of[on] = {json.dumps(refs[n].samplers["primitive"].settings, sort_keys=True) for n in names}
+    assert settings_of["val100"] == settings_of["h100"] and len(settings_of["h100"]) == 1
+    assert not set(dc.SETS["val100"][0]) & set(dc.SETS["h100"][0])
 
 
 def test_diagnose_clone_consistency(ref_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -169,16 +169,16 @@ def load_reference(path: str | Path) -> ScenarioReference:
     return ScenarioReference.from_dict(d, source=f"reference file {str(p)!r}")
 
 
-def load_references(out_dir: str | Path) -> dict[str, ScenarioReference]:
-    """Every reference file in ``out_dir`` by scenario name ({} if the folder does not exist)."""
+def load_references(out_dir: str | Path, select: Callable[[str], bool] | None = None) -> dict[str, ScenarioReference]:
+    """Every reference file in ``out_dir`` by scenario name ({} if the folder does not exist).
+
+    :param select: only the files whose name without ``.json`` it accepts are read (a folder of
+        demonstrations holds tens of thousands, of which a cloning takes a few).
+    """
     d = Path(out_dir)
     if not d.is_dir():
         return {}
-    refs = {}
-    for p in sorted(d.glob("*.json")):
-        r = load_reference(p)
-        refs[p.stem] = r
-    return refs
+    return {p.stem: load_reference(p) for p in sorted(d.glob("*.json")) if select is None or select(p.stem)}
 
 
 #: Search settings: one :class:`ReferenceConfig` for every action set, or one per action set.
