@@ -134,6 +134,8 @@ def test_demo_match_selects_the_files_by_scenario_name(ref_dir: Path, tmp_path: 
     again = demonstrations(tmp_path / "more", make, sampler="continuous", gamma=0.99, match=r"tiny-1")
     assert np.array_equal(again.observations, one.observations)
     assert set(load_references(tmp_path / "more", lambda name: name != "other-0")) == {"tiny-0", "tiny-1"}
+    with pytest.raises(ConfigError, match="select="):
+        load_references(tmp_path / "more", "tiny-0")  # type: ignore[arg-type]
     with pytest.raises(ConfigError, match=r"other-0\.json"):
         demonstrations(tmp_path / "more", make, sampler="continuous", gamma=0.99)
 

@@ -175,6 +175,8 @@ def load_references(out_dir: str | Path, select: Callable[[str], bool] | None = 
     :param select: only the files whose name without ``.json`` it accepts are read (a folder of
         demonstrations holds tens of thousands, of which a cloning takes a few).
     """
+    if select is not None and not callable(select):
+        raise ConfigError(f"select={select!r} must be None or a function of a file name (without .json) to bool")
     d = Path(out_dir)
     if not d.is_dir():
         return {}
