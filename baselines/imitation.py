@@ -601,6 +601,7 @@ def rollout_improved(
     *,
     candidates: int,
     steps: int | None = None,
+    follow: str = "improved",
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """The policy's mode improved by one-step lookahead with the mode as base policy (Bertsekas'
     rollout algorithm, the policy-improvement step of approximate policy iteration).
@@ -617,6 +618,13 @@ def rollout_improved(
     :param logits: observation -> the policy's logits over the actions.
     :param candidates: actions tried per step (>= 1; 1 gives the mode).
     :param steps: decide only the first ``steps`` steps so (None: every step).
+    :param follow: ``"improved"`` (default): the steps are decided along the kept episode, as
+        above; ``"mode"``: the actions are tried at every state of the mode's own episode and the
+        mode's episode is returned with them, however much better a tried one was -- the states the
+        policy itself visits, labelled with what each action there is worth (the state distribution
+        of classification-based approximate policy iteration, Lagoudakis & Parr 2003), where the
+        kept episode leaves the mode's path at the first step that pays and never labels the states
+        the mode goes wrong in.
     :returns: ``(mode, improved)`` episodes with :func:`sampled_episodes`' keys; ``improved`` also
         has ``tried``, the episodes flown, and ``candidate_costs``: per step of its ``actions`` the
         ``(action, energy [J/kg])`` of each action tried there, the mode flying on (None: that
@@ -625,6 +633,8 @@ def rollout_improved(
     """
     candidates = check_int("candidates", candidates, 1)
     horizon = math.inf if steps is None else check_int("steps", steps, 0)
+    if follow not in ("improved", "mode"):
+        raise ConfigError(f"follow={follow!r} must be 'improved' or 'mode'")
     mode = _fly_mode(env, logits, scenario, (), candidates)
 
     def key(ep: dict[str, Any]) -> float:
@@ -644,7 +654,7 @@ def rollout_improved(
             ep = _fly_mode(env, logits, scenario, [*prefix, a], candidates)
             tried += 1
             here.append((a, cost(ep)))
-            if key(ep) < key(best):  # later steps are decided along the new episode
+            if follow == "improved" and key(ep) < key(best):  # later steps are decided along the new episode
                 best = ep
         costs.append(here)
         t += 1

@@ -133,6 +133,9 @@ class TrainConfig:
     :param scorer_lift: with ``policy="successor"``: also give the scorer the updraft the observed
         field has at each successor's end point and on a 20 m ring around it
         (:meth:`baselines.scoring.SuccessorFeatures.lift_at`): where the next edge can climb.
+    :param scorer_skip: with ``policy="successor"``: add a linear layer from the successor features
+        to the logit beside the scorer's MLP (initialised as SB3 initialises the others; zero where
+        ``init_from`` a policy without it, which then starts from that policy unchanged). Default off.
     :param demo_equivalents: with ``policy="successor"`` and ``demos``: each row's label is the set
         of primitives whose successor is near-equivalent to the demonstrated one's (end point
         within 50 m, height within 10 m, edge cost within 20 J/kg:
@@ -238,6 +241,7 @@ class TrainConfig:
     scorer_hidden: tuple[int, ...] = (64, 64)
     scorer_estimate: bool = False
     scorer_lift: bool = False
+    scorer_skip: bool = False
     demo_equivalents: bool = False
     demo_q_weight: float = 0.0
     demo_soft_temperature: float = 0.0
@@ -315,6 +319,10 @@ class TrainConfig:
             raise ValueError(f"scorer_lift={self.scorer_lift!r} must be true or false")
         if self.scorer_lift and self.policy != "successor":
             raise ValueError(f"scorer_lift=True needs policy='successor' (got policy={self.policy!r})")
+        if not isinstance(self.scorer_skip, bool):
+            raise ValueError(f"scorer_skip={self.scorer_skip!r} must be true or false")
+        if self.scorer_skip and self.policy != "successor":
+            raise ValueError(f"scorer_skip=True needs policy='successor' (got policy={self.policy!r})")
         if not isinstance(self.demo_equivalents, bool):
             raise ValueError(f"demo_equivalents={self.demo_equivalents!r} must be true or false")
         if self.demo_equivalents and self.policy != "successor":
@@ -1190,12 +1198,18 @@ def _init_policy_from(model: Any, init_from: str, log_std_init: float) -> None:
     """Load ``init_from``'s weights into ``model``, then re-initialise the value function (SB3's
     orthogonal initialisation and gains), the Gaussian policy's log std and the optimizer."""
     import torch
+    from stable_baselines3.common.save_util import load_from_zip_file
 
-    try:
-        model.set_parameters(str(_init_model_path(init_from)), exact_match=True, device="cpu")
-    except (RuntimeError, ValueError) as e:  # torch's size mismatch: other spaces or layers
-        raise ValueError(f"init_from={init_from!r} does not fit this run's spaces and layers: {e}") from e
     pol = model.policy
+    try:
+        _, params, _ = load_from_zip_file(str(_init_model_path(init_from)), device="cpu")
+        saved = dict((params or {})["policy"])
+        # a layer this run adds beside the saved ones (``scorer_skip``) starts at zero: the saved policy
+        # exactly (SB3's orthogonal initialisation has already drawn it)
+        saved.update({k: torch.zeros_like(v) for k, v in pol.state_dict().items() if k not in saved and ".skip." in k})
+        pol.load_state_dict(saved, strict=True)
+    except (RuntimeError, ValueError, KeyError) as e:  # torch's size mismatch: other spaces or layers
+        raise ValueError(f"init_from={init_from!r} does not fit this run's spaces and layers: {e}") from e
     torch.manual_seed(model.seed if model.seed is not None else 0)  # the fresh critic is seeded too
     pol.mlp_extractor.value_net.apply(lambda m: pol.init_weights(m, gain=math.sqrt(2.0)))
     pol.init_weights(pol.value_net, gain=1.0)
@@ -1416,6 +1430,8 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
                 policy_kwargs["scorer"]["estimate"] = True
             if config.scorer_lift:
                 policy_kwargs["scorer"]["lift"] = True
+            if config.scorer_skip:
+                policy_kwargs["scorer"]["skip"] = True
         model = algo_cls(
             policy_cls,
             train_env,

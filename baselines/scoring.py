@@ -647,7 +647,7 @@ class SuccessorScorer(nn.Module):
     offers, so states the plans never visit are scored too (README, round nine).
     """
 
-    def __init__(self, obs_dim: int, hidden: Sequence[int] = (128, 128), **features: Any) -> None:
+    def __init__(self, obs_dim: int, hidden: Sequence[int] = (128, 128), skip: bool = False, **features: Any) -> None:
         super().__init__()
         self.features = SuccessorFeatures(**features)
         sizes = [self.features.n_features, *(int(h) for h in hidden)]
@@ -656,10 +656,17 @@ class SuccessorScorer(nn.Module):
             layers += [nn.Linear(a, b), nn.Tanh()]
         layers.append(nn.Linear(sizes[-1], 1))
         self.head = nn.Sequential(*layers)
+        # a linear path beside the MLP (``scorer_skip``): the parts of a successor's worth that are
+        # linear in its features (edge cost, height) exactly, where the tanh MLP is only near them.
+        # Zeroed where a policy without it is loaded into it (``init_from``).
+        self.skip: nn.Linear | None = nn.Linear(sizes[0], 1) if skip else None
 
     def forward(self, obs: Any) -> Any:
         f = torch.as_tensor(self.features(obs.detach().cpu().numpy()), dtype=obs.dtype)
-        return self.head(f).squeeze(-1)
+        out = self.head(f)
+        if self.skip is not None:
+            out = out + self.skip(f)
+        return out.squeeze(-1)
 
 
 class SuccessorExtractor(MlpExtractor):

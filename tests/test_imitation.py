@@ -589,6 +589,41 @@ def test_cloning_on_two_torch_threads_is_deterministic(ref_dir: Path, tmp_path: 
             TrainConfig(torch_threads=bad)  # type: ignore[arg-type]
 
 
+def test_scorer_skip_starts_from_the_policy_it_is_initialised_from(ref_dir: Path, tmp_path: Path) -> None:
+    """``scorer_skip``: a linear layer beside the scorer's MLP, zero at the start, so a run with it
+    ``init_from`` a run without it (no cloning epochs) scores every primitive exactly as that run
+    does; the saved policy keeps the layer; a run without it does not load one that has it."""
+    from baselines.agents import PPOAgent
+    from baselines.evaluation import make_env, ppo_env_kwargs
+
+    kw = {"policy": "successor", "scorer_hidden": (8,), "demo_epochs": 1}
+    base = train(dataclasses.replace(_tiny_run("discrete", ref_dir, **kw), total_timesteps=0), tmp_path / "base")
+    cfg = dataclasses.replace(
+        _tiny_run("discrete", ref_dir, **{**kw, "demo_epochs": 0}),
+        total_timesteps=0,
+        scorer_skip=True,
+        init_from=str(base),
+    )
+    skip = train(cfg, tmp_path / "skip")
+    a, b = PPOAgent(base), PPOAgent(skip)
+    assert b.model.policy.mlp_extractor.policy_net.skip is not None
+    assert a.model.policy.mlp_extractor.policy_net.skip is None
+    env = make_env(a.env_id, ppo_env_kwargs(a.config))
+    a.reset(env)
+    b.reset(env)
+    for k in (5, 6, 7):
+        obs = env.reset(seed=0, options={"scenario": get_scenario(f"random-{k}")})[0]
+        assert np.array_equal(a.logits(obs), b.logits(obs))
+    env.close()
+    with pytest.raises(ValueError, match="does not fit"):  # the saved skip layer has nowhere to go
+        train(dataclasses.replace(cfg, scorer_skip=False, init_from=str(skip)), tmp_path / "back")
+    for bad in ("yes", 1, None):
+        with pytest.raises(ValueError, match="scorer_skip"):
+            TrainConfig(algo="discrete", policy="successor", scorer_skip=bad)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="scorer_skip=True needs policy='successor'"):
+        TrainConfig(algo="discrete", policy="scoring", scorer_skip=True)
+
+
 def test_control_grid_is_the_reference_control_set_and_indexes_back() -> None:
     """Every row of the grid is found again by ``grid_index`` (exhaustive); the wrapper flies it."""
     import gymnasium as gym
@@ -889,6 +924,77 @@ def test_rollout_improved_is_no_worse_than_any_first_step_deviation() -> None:
         with pytest.raises(ConfigError):
             rollout_improved(env, agent.logits, sc, **bad)
     env.close()
+
+
+def test_rollout_improved_following_the_mode_labels_the_modes_own_states() -> None:
+    """``follow="mode"`` keeps the mode's episode and tries the candidates at each of its states:
+    every step is labelled, its first entry is the mode's action with the mode's cost, and each
+    tried action's cost is that of the episode flown by hand (the mode's prefix, the action, the
+    mode flying on); an unknown ``follow`` is refused."""
+    from baselines.agents import PPOAgent
+    from baselines.evaluation import make_env, ppo_env_kwargs
+    from baselines.imitation import rollout_improved
+
+    agent = PPOAgent(Path(__file__).resolve().parents[1] / "results" / "ppo-score" / "m3-s0" / "discrete")
+    env = make_env(agent.env_id, ppo_env_kwargs(agent.config))
+    agent.reset(env)
+    sc = get_scenario("random-20005")
+    mode, kept = rollout_improved(env, agent.logits, sc, candidates=3, follow="mode")
+    assert kept["actions"] == mode["actions"] and kept["energy_spent"] == mode["energy_spent"]
+    costs = kept["candidate_costs"]
+    assert len(costs) == len(mode["actions"]) and all(len(c) == 3 for c in costs)
+    assert kept["tried"] == 1 + 2 * len(mode["actions"])
+    for t, step in enumerate(costs):
+        assert step[0] == (mode["actions"][t], mode["energy_spent"])
+        for a, cost in step[1:2]:  # the second likeliest, flown by hand
+            obs, _ = env.reset(seed=0, options={"scenario": sc})
+            for b in [*mode["actions"][:t], a]:
+                obs, _, term, trunc, info = env.step(int(b))
+            while not (term or trunc):
+                obs, _, term, trunc, info = env.step(int(np.argmax(agent.logits(obs))))
+            assert cost == (info["energy_spent"] if term and info["is_success"] else None)
+    assert min(c for step in costs for _, c in step if c is not None) <= mode["energy_spent"]
+    with pytest.raises(ConfigError, match="follow"):
+        rollout_improved(env, agent.logits, sc, candidates=3, follow="best")
+    env.close()
+
+
+def test_decisions_score_the_trying_policy_against_its_own_lookahead(
+    ref_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``demos.py --lookahead C --follow mode`` keeps the mode's own episodes, labelled at every
+    step; ``diagnose_clone.py decisions`` of the policy that tried them then picks the mode at
+    every state: nothing untried, and its excess is, per step, the mode's energy above the
+    cheapest tried (computed here from the plan files). Plans without candidate costs (a search's)
+    are refused; ``--follow`` without ``--lookahead`` too."""
+    from baselines.cli import diagnose_clone as dc
+    from baselines.cli.demos import main
+
+    run = Path(__file__).resolve().parents[1] / "results" / "ppo-score" / "m3-s0" / "discrete"
+    out = tmp_path / "plans"
+    look = ["--scenarios", "2", "--first", "5", "--lookahead", "3", "--margin", "0", "--tag", "m1", "--no-progress"]
+    assert main(["--self-imitate", str(run), *look, "--follow", "mode", "--out", str(out)]) == 0
+    log = json.loads((out / "self-imitation" / "m1-20005+2.json").read_text())
+    assert log["settings"]["follow"] == "mode"
+    excess: list[float] = []
+    for name, row in log["scenarios"].items():
+        assert row["kept"] and row["best_sampled"] == row["greedy"]  # the mode's own episode
+        plan = load_reference(out / f"{name}-m1s0.json").samplers["primitive"]
+        assert len(plan.candidate_costs) == len(plan.actions)
+        for a, step in zip(plan.actions, plan.candidate_costs, strict=True):
+            assert step[0] == [a, plan.best_cost]
+            excess.append(plan.best_cost - min(c for _, c in step if c is not None))
+    rep = dc.decisions_report(run, out, None)
+    every = rep["steps"]["all"]
+    assert rep["plans"] == 2 and every["rows"] == len(excess) and every["untried"] == 0.0
+    assert math.isclose(every["excess"], float(np.mean(excess)), rel_tol=1e-12)
+    assert math.isclose(every["best"], float(np.mean(np.array(excess) <= 1e-9)))
+    assert rep["steps"]["0"]["rows"] == 2
+    with pytest.raises(ConfigError, match="no candidate costs"):
+        dc.decisions_report(run, ref_dir, None)
+    with pytest.raises(SystemExit) as exc:
+        main(["--self-imitate", str(run), *look[:4], "--follow", "mode", "--out", str(out)])
+    assert exc.value.code == 2 and "--follow" in capsys.readouterr().err
 
 
 def test_demos_cli_self_imitation_keeps_better_sampled_episodes_and_resumes(

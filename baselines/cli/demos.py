@@ -116,6 +116,13 @@ def main(argv: list[str] | None = None) -> int:
         "likeliest primitives at every step, the mode flying on (baselines.imitation.rollout_improved)",
     )
     p.add_argument(
+        "--follow",
+        choices=["improved", "mode"],
+        default="improved",
+        help="with --lookahead: decide the steps along the improved episode (default) or try the C primitives "
+        "at every state of the mode's own episode and keep that episode, labelled (the policy's own states)",
+    )
+    p.add_argument(
         "--env-kwargs",
         default=None,
         metavar="JSON",
@@ -142,6 +149,8 @@ def main(argv: list[str] | None = None) -> int:
             p.error(f"--samples={args.samples} must be >= 1")
         if args.lookahead is not None and args.lookahead < 1:
             p.error(f"--lookahead={args.lookahead} must be >= 1 (primitives tried per step)")
+        if args.follow != "improved" and args.lookahead is None:
+            p.error(f"--follow={args.follow} goes with --lookahead")
         try:
             return _self_imitation(args)
         except (ConfigError, FileNotFoundError) as exc:
@@ -292,7 +301,7 @@ def _self_imitation(args: argparse.Namespace) -> int:
     method: dict[str, Any] = (
         {"samples": args.samples, "temperature": args.temperature}
         if args.lookahead is None
-        else {"lookahead": args.lookahead}
+        else {"lookahead": args.lookahead, **({"follow": args.follow} if args.follow != "improved" else {})}
     )
     settings = {
         "self_imitate": str(agent.model_path),
@@ -319,7 +328,7 @@ def _self_imitation(args: argparse.Namespace) -> int:
             best = best_reached(drawn)
             flown = {"reached": sum(e["success"] for e in drawn)}
         else:
-            greedy, improved = rollout_improved(env, agent.logits, sc, candidates=args.lookahead)
+            greedy, improved = rollout_improved(env, agent.logits, sc, candidates=args.lookahead, follow=args.follow)
             best = improved if improved["success"] else None
             flown = {"tried": improved["tried"]}
         greedy_cost = greedy["energy_spent"] if greedy["success"] else math.inf

@@ -12,6 +12,9 @@ Measurements for the successor policies of ``scripts/train_ppo.py --algo discret
   distance instead of the end point, README) or *different* (everything
   else); separately for the rows a DAgger round labelled (a visited state: the first row of a
   ``-<tag>s<k>`` plan).
+* ``decisions`` (round nineteen): the run's pick at every state of lookahead plans (``--match``;
+  ``scripts/demos.py --self-imitate RUN --lookahead C``) against the cheapest of the primitives
+  tried there, by the step's index in the plan: where in the flight the policy loses energy.
 * ``demonstrator``: the regret of the demonstrator itself (the goal env's own search with the time
   weight and beam width of ``scripts/demos.py``) on scenarios outside its training set, its plans
   replayed through ``env.step`` and scored against ``--reference-dir``.
@@ -44,6 +47,7 @@ Scenario sets (``--on``): ``val`` = ``random-5000 ... 5019`` against ``results/r
 Usage::
 
     python scripts/diagnose_clone.py fit --runs results/ppo-score/s3 --match 'random-201[2-7]\\d-s3s\\d+'
+    python scripts/diagnose_clone.py decisions --runs results/ppo-score/n2-s0 --match 'random-99\\d\\d\\d-n3s0'
     python scripts/diagnose_clone.py demonstrator --on val --out results/ppo-score/round10/demonstrator
     python scripts/diagnose_clone.py consistency --samples 60 --out results/ppo-score/round11/consistency
     python scripts/diagnose_clone.py ensemble --runs results/ppo-score/s2 results/ppo-score/s3 --on h100
@@ -107,11 +111,10 @@ def _logits(policy: Any, obs: np.ndarray) -> np.ndarray:
     return np.concatenate(out)
 
 
-def fit_report(run: str | Path, demos_dir: str | Path, match: str | None) -> dict[str, Any]:
-    """The ``fit`` measurement of one run on the demonstrations that ``match`` selects."""
+def _policy_and_plans(run: str | Path, demos_dir: str | Path, match: str | None) -> tuple[Path, Any, Any]:
+    """One run's folder and model, and the demonstrations that ``match`` selects replayed in its env."""
     from baselines.imitation import demonstrations
     from baselines.ppo import load_model, make_eval_env
-    from baselines.scoring import accepted_successors
 
     d = _run_dir(run)
     c = json.loads((d / "config.json").read_text())["config"]
@@ -125,6 +128,14 @@ def fit_report(run: str | Path, demos_dir: str | Path, match: str | None) -> dic
         gamma=float(c["gamma"]),
         match=match,
     )
+    return d, model, plans
+
+
+def fit_report(run: str | Path, demos_dir: str | Path, match: str | None) -> dict[str, Any]:
+    """The ``fit`` measurement of one run on the demonstrations that ``match`` selects."""
+    from baselines.scoring import accepted_successors
+
+    d, model, plans = _policy_and_plans(run, demos_dir, match)
     obs, act = plans.observations, plans.actions.astype(np.int64)
     lg = _logits(model.policy, obs)
     lp = lg - lg.max(axis=1, keepdims=True)
@@ -155,6 +166,51 @@ def fit_report(run: str | Path, demos_dir: str | Path, match: str | None) -> dic
         "all": shares(np.ones(len(act), bool)),
         "visited": shares(visited),
     }
+
+
+#: ``decisions``: the step groups reported, (label, first step, last step).
+STEP_GROUPS = (("0", 0, 0), ("1", 1, 1), ("2", 2, 2), ("3", 3, 3), ("4-7", 4, 7), ("8+", 8, 10**9), ("all", 0, 10**9))
+
+
+def decisions_report(run: str | Path, demos_dir: str | Path, match: str | None) -> dict[str, Any]:
+    """The ``decisions`` measurement: one run's pick at every state of lookahead plans (the plans'
+    ``candidate_costs``: each tried primitive's energy with the trying policy's mode flying on)
+    against the cheapest primitive tried there, by the step's index in its plan.
+
+    Per group of steps: ``rows`` (states where some tried primitive reached the goal), ``excess``
+    (mean energy [J/kg] of the pick's episode above the cheapest, over the rows whose pick was
+    tried and reached the goal), ``best`` (share of rows picking a cheapest), ``untried`` (share
+    whose pick was not tried or missed the goal: no cost to compare)."""
+    from baselines.reference.yardstick import load_references
+
+    d, model, plans = _policy_and_plans(run, demos_dir, match)
+    names = set(plans.scenarios)
+    refs = load_references(demos_dir, select=lambda n: n in names)
+    costs: list[dict[int, float]] = []
+    for name in plans.scenarios:
+        steps = refs[name].samplers["primitive"].candidate_costs
+        if not steps:
+            raise ConfigError(f"{name}: no candidate costs (not a lookahead plan: scripts/demos.py --lookahead)")
+        costs += [{int(a): float(c) for a, c in step if c is not None} for step in steps]
+    if len(costs) != len(plans):
+        raise ConfigError(f"{len(costs)} steps of candidate costs for {len(plans)} replayed rows")
+    pick = _logits(model.policy, plans.observations).argmax(axis=1)
+    starts = np.flatnonzero(np.r_[True, plans.episode[1:] != plans.episode[:-1]])
+    step = np.arange(len(plans)) - starts[np.searchsorted(starts, np.arange(len(plans)), side="right") - 1]
+    labelled = np.array([bool(c) for c in costs])
+    excess = np.array([c[a] - min(c.values()) if a in c else np.nan for c, a in zip(costs, pick.tolist(), strict=True)])
+    groups = {}
+    for label, lo, hi in STEP_GROUPS:
+        m = labelled & (step >= lo) & (step <= hi)
+        tried = m & np.isfinite(excess)
+        n = max(int(m.sum()), 1)
+        groups[label] = {
+            "rows": int(m.sum()),
+            "excess": float(excess[tried].mean()) if tried.any() else float("nan"),
+            "best": float((tried & (excess <= 1e-9)).sum() / n),
+            "untried": float((m & ~tried).sum() / n),
+        }
+    return {"run": str(d), "match": match, "plans": len(plans.scenarios), "steps": groups}
 
 
 def _demo_search(
@@ -425,14 +481,16 @@ def regret_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point; returns the exit status."""
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("mode", choices=("fit", "demonstrator", "consistency", "ensemble", "sampled", "rollout"))
+    p.add_argument(
+        "mode", choices=("fit", "decisions", "demonstrator", "consistency", "ensemble", "sampled", "rollout")
+    )
     p.add_argument("--runs", nargs="+", default=[], help="successor-policy runs (fit: each; ensemble: together)")
     p.add_argument("--demos", default="results/reference-train-prim-t1", help="fit: the demonstrations' folder")
     p.add_argument(
         "--match",
         default=None,
-        help="fit, consistency: only the scenario names matching this regular expression (consistency: "
-        "default the base plans, random-20\\d\\d\\d)",
+        help="fit, decisions, consistency: only the scenario names matching this regular expression "
+        "(consistency: default the base plans, random-20\\d\\d\\d)",
     )
     p.add_argument("--samples", type=int, default=60, help="consistency: states to plan again from; sampled: episodes")
     p.add_argument("--temperature", type=float, default=1.0, help="sampled: of the logits (default 1)")
@@ -488,6 +546,16 @@ def main(argv: list[str] | None = None) -> int:
                     f"| {f['run']} | {f['plans']} | {a['rows']} | {a['nll']:.3f} | {a['top1']:.3f} | "
                     f"{a['near_equivalent']:.3f} | {a['different']:.3f} | {v['top1']:.3f} | {v['different']:.3f} |"
                 )
+        elif args.mode == "decisions":
+            res = {"decisions": [decisions_report(r, args.demos, args.match) for r in args.runs]}
+            print("| run | steps | rows | excess [J/kg] | picks a cheapest | untried |")
+            print("|---|---|---:|---:|---:|---:|")
+            for f in res["decisions"]:
+                for label, g in f["steps"].items():
+                    print(
+                        f"| {f['run']} | {label} | {g['rows']} | {g['excess']:.1f} | {g['best']:.3f} | "
+                        f"{g['untried']:.3f} |"
+                    )
         elif args.mode == "demonstrator":
             res = demonstrator_report(
                 args.on, args.out, args.beam_width, args.time_weight, args.workers, not args.no_progress
