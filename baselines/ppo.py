@@ -172,6 +172,12 @@ class TrainConfig:
         rewards (a critic that learnt "the goal costs 50" keeps a policy from trying it again), and
         a policy that had become nearly deterministic (std 0.02) would not explore the new task.
         None (default): fresh weights.
+    :param ensemble_of: with ``policy="successor"``: two or more earlier runs (directories or
+        ``.zip`` paths) of successor policies with this run's scorer settings, loaded into one
+        policy whose logits are the mean of theirs (each run a member of the scorer; the features are
+        computed once for all). E.g. the stages of one chain of tuning rounds, which pick different
+        thermals on many scenarios (README, round twenty). The value function starts fresh as with
+        ``init_from`` (which cannot be given too). Empty (default): one scorer.
     :param demos: a folder of reference-search files (``scripts/reference.py --out DIR``): before
         PPO, the policy is fitted to their plans replayed through this run's env and the critic to
         their returns (:mod:`baselines.imitation`, behaviour cloning), after ``init_from`` if both
@@ -252,6 +258,7 @@ class TrainConfig:
     turn_exponent: float = 3.0
     env_kwargs: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     init_from: str | None = None
+    ensemble_of: tuple[str, ...] = ()
     demos: str | None = None
     demo_match: str | None = None
     demo_mirror: bool = True
@@ -289,8 +296,12 @@ class TrainConfig:
         if self.vec_env == "native" and self.shaping:
             raise ValueError("shaping needs vec_env='dummy' or 'subproc' (GoalDistanceShaping wraps single envs)")
         for name in ("total_timesteps", "n_envs", "n_steps", "batch_size", "n_epochs", "n_eval_scenarios"):
-            if int(getattr(self, name)) < (0 if name == "total_timesteps" and self.demos is not None else 1):
-                raise ValueError(f"{name}={getattr(self, name)!r} must be >= 1 (total_timesteps: 0 with demos)")
+            # 0 timesteps: the cloning alone, or the ensemble of earlier runs as it is
+            zero_ok = name == "total_timesteps" and (self.demos is not None or bool(self.ensemble_of))
+            if int(getattr(self, name)) < (0 if zero_ok else 1):
+                raise ValueError(
+                    f"{name}={getattr(self, name)!r} must be >= 1 (total_timesteps: 0 with demos or ensemble_of)"
+                )
         if self.eval_freq < 1 or self.checkpoint_freq < 0:
             raise ValueError("eval_freq must be >= 1 and checkpoint_freq >= 0")
         if self.max_minutes is not None and not self.max_minutes > 0:
@@ -335,6 +346,22 @@ class TrainConfig:
                 raise ValueError(f"init_from={self.init_from!r} must be a run directory or .zip path (a string)")
             object.__setattr__(self, "init_from", str(self.init_from))
             _init_model_path(self.init_from)
+        runs = self.ensemble_of
+        if isinstance(runs, (str, bytes)) or not hasattr(runs, "__iter__"):
+            raise ValueError(f"ensemble_of={runs!r} must be a list of run directories or .zip paths")
+        runs = tuple(runs)
+        if runs:
+            if len(runs) < 2 or not all(isinstance(r, (str, Path)) for r in runs):
+                raise ValueError(f"ensemble_of={list(runs)!r} must name at least two runs (directories or .zip paths)")
+            if self.policy != "successor" or self.init_from is not None:
+                raise ValueError(
+                    f"ensemble_of needs policy='successor' and no init_from (got policy={self.policy!r}, "
+                    f"init_from={self.init_from!r})"
+                )
+            runs = tuple(str(r) for r in runs)
+            for r in runs:
+                _init_model_path(r)
+        object.__setattr__(self, "ensemble_of", runs)
         if self.demos is not None:
             if not isinstance(self.demos, (str, Path)) or not Path(self.demos).is_dir():
                 raise ValueError(f"demos={self.demos!r} must be a folder of reference files (scripts/reference.py)")
@@ -1210,6 +1237,55 @@ def _init_policy_from(model: Any, init_from: str, log_std_init: float) -> None:
         pol.load_state_dict(saved, strict=True)
     except (RuntimeError, ValueError, KeyError) as e:  # torch's size mismatch: other spaces or layers
         raise ValueError(f"init_from={init_from!r} does not fit this run's spaces and layers: {e}") from e
+    _fresh_critic(model, log_std_init)
+
+
+def _ensemble_policy_from(model: Any, runs: Sequence[str]) -> None:
+    """Load the successor scorers of ``runs`` (``ensemble_of``) into the members of ``model``'s
+    scorer, the first run's into its first member (the rest of the policy too), then re-initialise
+    the value function and the optimizer as :func:`_init_policy_from` does.
+
+    :raises ValueError: a run that is not a single successor scorer with exactly this run's scorer
+        settings (features, widths, skip layer).
+    """
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    pol = model.policy
+    mine = {k: v for k, v in dict(getattr(pol, "scorer", {})).items() if k != "members"}
+    state: dict[str, Any] = {}
+    prefix = "mlp_extractor.policy_net."
+    for k, run in enumerate(runs):
+        data, params, _ = load_from_zip_file(str(_init_model_path(run)), device="cpu")
+        theirs = dict(((data or {}).get("policy_kwargs") or {}).get("scorer") or {})
+        members = int(theirs.pop("members", 1))
+        if members != 1 or json.dumps(theirs, sort_keys=True) != json.dumps(mine, sort_keys=True):
+            differ = sorted(n for n in set(theirs) | set(mine) if theirs.get(n) != mine.get(n))
+            raise ValueError(
+                f"ensemble_of[{k}]={run!r} is not a single successor scorer with this run's settings "
+                f"(members={members}; differs in: {', '.join(differ) or 'nothing'}); give each member's "
+                "policy, scorer_hidden, scorer_estimate, scorer_lift and scorer_skip"
+            )
+        saved = dict((params or {})["policy"])
+        if k == 0:
+            state.update(saved)
+            continue
+        for name, value in saved.items():
+            for part, into in (("head.", f"more.{k - 1}."), ("skip.", f"more_skip.{k - 1}.")):
+                if name.startswith(prefix + part):
+                    state[prefix + into + name[len(prefix + part) :]] = value
+    try:
+        pol.load_state_dict(state, strict=True)
+    except (RuntimeError, KeyError) as e:  # torch's size mismatch: other spaces or layers
+        raise ValueError(f"ensemble_of={list(runs)!r} does not fit this run's spaces and layers: {e}") from e
+    _fresh_critic(model, 0.0)
+
+
+def _fresh_critic(model: Any, log_std_init: float) -> None:
+    """Re-initialise ``model``'s value function (SB3's orthogonal initialisation and gains, seeded by
+    the run's seed), the Gaussian policy's log std and the optimizer: after loading earlier weights."""
+    import torch
+
+    pol = model.policy
     torch.manual_seed(model.seed if model.seed is not None else 0)  # the fresh critic is seeded too
     pol.mlp_extractor.value_net.apply(lambda m: pol.init_weights(m, gain=math.sqrt(2.0)))
     pol.init_weights(pol.value_net, gain=1.0)
@@ -1432,6 +1508,8 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
                 policy_kwargs["scorer"]["lift"] = True
             if config.scorer_skip:
                 policy_kwargs["scorer"]["skip"] = True
+            if config.ensemble_of:
+                policy_kwargs["scorer"]["members"] = len(config.ensemble_of)
         model = algo_cls(
             policy_cls,
             train_env,
@@ -1453,6 +1531,8 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
         )
         if config.init_from is not None:
             _init_policy_from(model, config.init_from, config.log_std_init)
+        if config.ensemble_of:
+            _ensemble_policy_from(model, config.ensemble_of)
         if config.demos is not None:
             record["behaviour_cloning"], demos = _clone_demos(model, config, out)
             atomic_write_text(out / "config.json", json.dumps(record, indent=2))

@@ -647,26 +647,47 @@ class SuccessorScorer(nn.Module):
     offers, so states the plans never visit are scored too (README, round nine).
     """
 
-    def __init__(self, obs_dim: int, hidden: Sequence[int] = (128, 128), skip: bool = False, **features: Any) -> None:
+    def __init__(
+        self, obs_dim: int, hidden: Sequence[int] = (128, 128), skip: bool = False, members: int = 1, **features: Any
+    ) -> None:
         super().__init__()
+        if isinstance(members, bool) or not isinstance(members, int) or members < 1:
+            raise ConfigError(f"members={members!r} must be an integer >= 1 (the scorers whose logits are averaged)")
         self.features = SuccessorFeatures(**features)
         sizes = [self.features.n_features, *(int(h) for h in hidden)]
-        layers: list[Any] = []
-        for a, b in itertools.pairwise(sizes):
-            layers += [nn.Linear(a, b), nn.Tanh()]
-        layers.append(nn.Linear(sizes[-1], 1))
-        self.head = nn.Sequential(*layers)
+
+        def mlp() -> nn.Sequential:
+            layers: list[Any] = []
+            for a, b in itertools.pairwise(sizes):
+                layers += [nn.Linear(a, b), nn.Tanh()]
+            layers.append(nn.Linear(sizes[-1], 1))
+            return nn.Sequential(*layers)
+
+        self.head = mlp()
         # a linear path beside the MLP (``scorer_skip``): the parts of a successor's worth that are
         # linear in its features (edge cost, height) exactly, where the tanh MLP is only near them.
         # Zeroed where a policy without it is loaded into it (``init_from``).
         self.skip: nn.Linear | None = nn.Linear(sizes[0], 1) if skip else None
+        # further members of an ensemble (``ensemble_of``): the same scorer trained apart; the policy's
+        # logits are the mean of all members' (one feature computation serves them all)
+        self.more = nn.ModuleList(mlp() for _ in range(members - 1))
+        self.more_skip = nn.ModuleList(nn.Linear(sizes[0], 1) for _ in range(members - 1) if skip)
+
+    @property
+    def members(self) -> int:
+        """How many scorers' logits are averaged (1: a single scorer)."""
+        return 1 + len(self.more)
 
     def forward(self, obs: Any) -> Any:
         f = torch.as_tensor(self.features(obs.detach().cpu().numpy()), dtype=obs.dtype)
         out = self.head(f)
         if self.skip is not None:
             out = out + self.skip(f)
-        return out.squeeze(-1)
+        for k, head in enumerate(self.more):
+            out = out + head(f)
+            if self.skip is not None:
+                out = out + self.more_skip[k](f)
+        return (out / self.members).squeeze(-1)
 
 
 class SuccessorExtractor(MlpExtractor):

@@ -624,6 +624,67 @@ def test_scorer_skip_starts_from_the_policy_it_is_initialised_from(ref_dir: Path
         TrainConfig(algo="discrete", policy="scoring", scorer_skip=True)
 
 
+def test_ensemble_of_averages_the_members_logits(ref_dir: Path, tmp_path: Path) -> None:
+    """``ensemble_of``: one policy whose logits are the mean of its members'. A run ensembled with
+    itself scores every primitive exactly as it does; two runs give the log-softmax of the mean of
+    their logits; the saved ensemble loads and flies; members with other scorer settings, an
+    ensemble as a member, one run alone and ``init_from`` beside it are refused."""
+    import torch
+
+    from baselines.agents import PPOAgent
+    from baselines.evaluation import make_env, ppo_env_kwargs
+
+    kw = {"policy": "successor", "scorer_hidden": (8,), "demo_epochs": 1}
+    runs = [
+        train(dataclasses.replace(_tiny_run("discrete", ref_dir, **kw), total_timesteps=0, seed=s), tmp_path / f"r{s}")
+        for s in (0, 1)
+    ]
+
+    def ens(members: Any, **more: Any) -> TrainConfig:
+        fields = {"total_timesteps": 0, "demos": None, "demo_epochs": 0, "ensemble_of": members, **more}
+        return dataclasses.replace(_tiny_run("discrete", ref_dir, **kw), **fields)
+
+    twice = train(ens((str(runs[0]), str(runs[0]))), tmp_path / "twice")
+    pair = train(ens(tuple(str(r) for r in runs)), tmp_path / "pair")
+    a, b, t, p = (PPOAgent(r) for r in (*runs, twice, pair))
+    assert p.model.policy.mlp_extractor.policy_net.members == 2
+    assert a.model.policy.mlp_extractor.policy_net.members == 1
+    env = make_env(a.env_id, ppo_env_kwargs(a.config))
+    for agent in (a, b, t, p):
+        agent.reset(env)
+    for k in (5, 6, 7):
+        obs = env.reset(seed=0, options={"scenario": get_scenario(f"random-{k}")})[0]
+        assert np.array_equal(t.logits(obs), a.logits(obs))
+        mean = torch.log_softmax(torch.as_tensor((a.logits(obs) + b.logits(obs)) / 2.0), 0).numpy()
+        np.testing.assert_allclose(p.logits(obs), mean, atol=1e-5)
+        assert not np.allclose(a.logits(obs), b.logits(obs), atol=1e-3)  # the members differ
+        assert env.action_space.contains(p.predict(obs)[0])
+    env.close()
+    other = train(
+        dataclasses.replace(_tiny_run("discrete", ref_dir, **{**kw, "scorer_hidden": (4,)}), total_timesteps=0),
+        tmp_path / "other",
+    )
+    with pytest.raises(ValueError, match=r"ensemble_of\[1\].*differs in: hidden"):
+        train(ens((str(runs[0]), str(other))), tmp_path / "bad")
+    with pytest.raises(ValueError, match=r"ensemble_of\[0\].*members=2"):
+        train(ens((str(pair), str(runs[0]))), tmp_path / "nested")
+    for bad in ((str(runs[0]),), str(runs[0]), (str(runs[0]), 3), 5):
+        with pytest.raises(ValueError, match="ensemble_of"):
+            ens(bad)
+    with pytest.raises(ValueError, match="no model"):
+        ens((str(runs[0]), str(tmp_path / "nowhere")))
+    with pytest.raises(ValueError, match="ensemble_of needs policy='successor' and no init_from"):
+        ens(tuple(str(r) for r in runs), init_from=str(runs[0]))
+    with pytest.raises(ValueError, match="ensemble_of needs policy='successor'"):
+        TrainConfig(algo="discrete", policy="scoring", ensemble_of=tuple(str(r) for r in runs))
+    with pytest.raises(ValueError, match="total_timesteps=0 must be >= 1"):
+        TrainConfig(algo="discrete", policy="successor", total_timesteps=0)
+    with pytest.raises(ConfigError, match="members"):
+        from baselines.scoring import SuccessorScorer
+
+        SuccessorScorer(4, members=0)
+
+
 def test_control_grid_is_the_reference_control_set_and_indexes_back() -> None:
     """Every row of the grid is found again by ``grid_index`` (exhaustive); the wrapper flies it."""
     import gymnasium as gym
