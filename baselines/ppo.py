@@ -177,7 +177,8 @@ class TrainConfig:
         policy whose logits are the mean of theirs (each run a member of the scorer; the features are
         computed once for all). E.g. the stages of one chain of tuning rounds, which pick different
         thermals on many scenarios (README, round twenty). The value function starts fresh as with
-        ``init_from`` (which cannot be given too). Empty (default): one scorer.
+        ``init_from`` (which cannot be given too), so ``net_arch`` need not be the runs'. Empty
+        (default): one scorer.
     :param demos: a folder of reference-search files (``scripts/reference.py --out DIR``): before
         PPO, the policy is fitted to their plans replayed through this run's env and the critic to
         their returns (:mod:`baselines.imitation`, behaviour cloning), after ``init_from`` if both
@@ -1242,8 +1243,8 @@ def _init_policy_from(model: Any, init_from: str, log_std_init: float) -> None:
 
 def _ensemble_policy_from(model: Any, runs: Sequence[str]) -> None:
     """Load the successor scorers of ``runs`` (``ensemble_of``) into the members of ``model``'s
-    scorer, the first run's into its first member (the rest of the policy too), then re-initialise
-    the value function and the optimizer as :func:`_init_policy_from` does.
+    scorer, the first run's into its first member, then re-initialise the value function (whose
+    widths need not match the runs') and the optimizer as :func:`_init_policy_from` does.
 
     :raises ValueError: a run that is not a single successor scorer with exactly this run's scorer
         settings (features, widths, skip layer).
@@ -1266,15 +1267,21 @@ def _ensemble_policy_from(model: Any, runs: Sequence[str]) -> None:
                 "policy, scorer_hidden, scorer_estimate, scorer_lift and scorer_skip"
             )
         saved = dict((params or {})["policy"])
-        if k == 0:
-            state.update(saved)
-            continue
         for name, value in saved.items():
-            for part, into in (("head.", f"more.{k - 1}."), ("skip.", f"more_skip.{k - 1}.")):
+            for part, into in (
+                ("head.", "head." if k == 0 else f"more.{k - 1}."),
+                ("skip.", "skip." if k == 0 else f"more_skip.{k - 1}."),
+            ):
                 if name.startswith(prefix + part):
                     state[prefix + into + name[len(prefix + part) :]] = value
+    # the scorers alone: the critic starts fresh below, so its widths (net_arch) need not match the members'
+    mine_keys = {n for n in pol.state_dict() if n.startswith(prefix)}
+    if set(state) != mine_keys:
+        raise ValueError(
+            f"ensemble_of={list(runs)!r} does not fit this run's scorer layers: {sorted(set(state) ^ mine_keys)[:4]}"
+        )
     try:
-        pol.load_state_dict(state, strict=True)
+        pol.load_state_dict(state, strict=False)
     except (RuntimeError, KeyError) as e:  # torch's size mismatch: other spaces or layers
         raise ValueError(f"ensemble_of={list(runs)!r} does not fit this run's spaces and layers: {e}") from e
     _fresh_critic(model, 0.0)

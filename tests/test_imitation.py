@@ -644,7 +644,7 @@ def test_ensemble_of_averages_the_members_logits(ref_dir: Path, tmp_path: Path) 
         fields = {"total_timesteps": 0, "demos": None, "demo_epochs": 0, "ensemble_of": members, **more}
         return dataclasses.replace(_tiny_run("discrete", ref_dir, **kw), **fields)
 
-    twice = train(ens((str(runs[0]), str(runs[0]))), tmp_path / "twice")
+    twice = train(ens((str(runs[0]), str(runs[0])), net_arch=(16,)), tmp_path / "twice")  # the critic's own widths
     pair = train(ens(tuple(str(r) for r in runs)), tmp_path / "pair")
     a, b, t, p = (PPOAgent(r) for r in (*runs, twice, pair))
     assert p.model.policy.mlp_extractor.policy_net.members == 2
