@@ -360,8 +360,8 @@ class TrainConfig:
                     f"init_from={self.init_from!r})"
                 )
             runs = tuple(str(r) for r in runs)
-            for r in runs:
-                _init_model_path(r)
+            for k, r in enumerate(runs):
+                _init_model_path(r, f"ensemble_of[{k}]")
         object.__setattr__(self, "ensemble_of", runs)
         if self.demos is not None:
             if not isinstance(self.demos, (str, Path)) or not Path(self.demos).is_dir():
@@ -1237,7 +1237,7 @@ def _init_policy_from(model: Any, init_from: str, log_std_init: float) -> None:
         saved.update({k: torch.zeros_like(v) for k, v in pol.state_dict().items() if k not in saved and ".skip." in k})
         pol.load_state_dict(saved, strict=True)
     except (RuntimeError, ValueError, KeyError) as e:  # torch's size mismatch: other spaces or layers
-        raise ValueError(f"init_from={init_from!r} does not fit this run's spaces and layers: {e}") from e
+        raise ConfigError(f"init_from={init_from!r} does not fit this run's spaces and layers: {e}") from e
     _fresh_critic(model, log_std_init)
 
 
@@ -1256,12 +1256,12 @@ def _ensemble_policy_from(model: Any, runs: Sequence[str]) -> None:
     state: dict[str, Any] = {}
     prefix = "mlp_extractor.policy_net."
     for k, run in enumerate(runs):
-        data, params, _ = load_from_zip_file(str(_init_model_path(run)), device="cpu")
+        data, params, _ = load_from_zip_file(str(_init_model_path(run, f"ensemble_of[{k}]")), device="cpu")
         theirs = dict(((data or {}).get("policy_kwargs") or {}).get("scorer") or {})
         members = int(theirs.pop("members", 1))
         if members != 1 or json.dumps(theirs, sort_keys=True) != json.dumps(mine, sort_keys=True):
             differ = sorted(n for n in set(theirs) | set(mine) if theirs.get(n) != mine.get(n))
-            raise ValueError(
+            raise ConfigError(
                 f"ensemble_of[{k}]={run!r} is not a single successor scorer with this run's settings "
                 f"(members={members}; differs in: {', '.join(differ) or 'nothing'}); give each member's "
                 "policy, scorer_hidden, scorer_estimate, scorer_lift and scorer_skip"
@@ -1277,13 +1277,13 @@ def _ensemble_policy_from(model: Any, runs: Sequence[str]) -> None:
     # the scorers alone: the critic starts fresh below, so its widths (net_arch) need not match the members'
     mine_keys = {n for n in pol.state_dict() if n.startswith(prefix)}
     if set(state) != mine_keys:
-        raise ValueError(
+        raise ConfigError(
             f"ensemble_of={list(runs)!r} does not fit this run's scorer layers: {sorted(set(state) ^ mine_keys)[:4]}"
         )
     try:
         pol.load_state_dict(state, strict=False)
     except (RuntimeError, KeyError) as e:  # torch's size mismatch: other spaces or layers
-        raise ValueError(f"ensemble_of={list(runs)!r} does not fit this run's spaces and layers: {e}") from e
+        raise ConfigError(f"ensemble_of={list(runs)!r} does not fit this run's spaces and layers: {e}") from e
     _fresh_critic(model, 0.0)
 
 
@@ -1406,12 +1406,13 @@ def _demo_start_plans(config: TrainConfig) -> list[tuple[Scenario, tuple[Any, ..
     return demo_plans(str(config.demos), sampler=sampler, match=config.demo_match)
 
 
-def _init_model_path(init_from: str) -> Path:
-    """The ``.zip`` of ``init_from`` (a run directory's ``model.zip``, or the file itself)."""
+def _init_model_path(init_from: str, field: str = "init_from") -> Path:
+    """The ``.zip`` of ``init_from`` (a run directory's ``model.zip``, or the file itself); ``field``
+    names the setting in the error."""
     p = Path(init_from)
     z = p / "model.zip" if p.is_dir() else p
     if not z.is_file():
-        raise ValueError(f"init_from={init_from!r}: no model at {z}")
+        raise ConfigError(f"{field}={init_from!r}: no model at {z}")
     return z
 
 

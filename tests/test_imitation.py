@@ -624,7 +624,9 @@ def test_scorer_skip_starts_from_the_policy_it_is_initialised_from(ref_dir: Path
         TrainConfig(algo="discrete", policy="scoring", scorer_skip=True)
 
 
-def test_ensemble_of_averages_the_members_logits(ref_dir: Path, tmp_path: Path) -> None:
+def test_ensemble_of_averages_the_members_logits(
+    ref_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """``ensemble_of``: one policy whose logits are the mean of its members'. A run ensembled with
     itself scores every primitive exactly as it does; two runs give the log-softmax of the mean of
     their logits; the saved ensemble loads and flies; members with other scorer settings, an
@@ -666,12 +668,21 @@ def test_ensemble_of_averages_the_members_logits(ref_dir: Path, tmp_path: Path) 
     )
     with pytest.raises(ValueError, match=r"ensemble_of\[1\].*differs in: hidden"):
         train(ens((str(runs[0]), str(other))), tmp_path / "bad")
+    from baselines.cli.train_ppo import main  # the same refusal from the command line: a usage error, no traceback
+
+    members = json.dumps([str(runs[0]), str(other)])
+    argv = ["--algo", "discrete", "--set", "total_timesteps=0", "--set", f"ensemble_of={members}", "--no-progress"]
+    argv += ["--set", 'policy="successor"', "--set", "scorer_hidden=[8]", "--out", str(tmp_path / "cli")]
+    with pytest.raises(SystemExit) as stop:
+        main(argv)
+    assert stop.value.code == 2
+    assert "ensemble_of[1]" in capsys.readouterr().err
     with pytest.raises(ValueError, match=r"ensemble_of\[0\].*members=2"):
         train(ens((str(pair), str(runs[0]))), tmp_path / "nested")
     for bad in ((str(runs[0]),), str(runs[0]), (str(runs[0]), 3), 5):
         with pytest.raises(ValueError, match="ensemble_of"):
             ens(bad)
-    with pytest.raises(ValueError, match="no model"):
+    with pytest.raises(ValueError, match=r"ensemble_of\[1\]=.*no model"):
         ens((str(runs[0]), str(tmp_path / "nowhere")))
     with pytest.raises(ValueError, match="ensemble_of needs policy='successor' and no init_from"):
         ens(tuple(str(r) for r in runs), init_from=str(runs[0]))
