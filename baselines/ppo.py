@@ -1246,8 +1246,8 @@ def _ensemble_policy_from(model: Any, runs: Sequence[str]) -> None:
     scorer, the first run's into its first member, then re-initialise the value function (whose
     widths need not match the runs') and the optimizer as :func:`_init_policy_from` does.
 
-    :raises ValueError: a run that is not a single successor scorer with exactly this run's scorer
-        settings (features, widths, skip layer).
+    :raises ConfigError: a run that is not a single successor scorer with exactly this run's scorer
+        settings (features, widths, skip layer), naming it (``ensemble_of[k]``) and what differs.
     """
     from stable_baselines3.common.save_util import load_from_zip_file
 
