@@ -17,6 +17,8 @@ interchangeable. Execution and scoring always go through ``env.step``.
 * :class:`PPOAgent` -- a saved stable-baselines3 / sb3-contrib model with the JSON configuration it
   was trained with (see :mod:`baselines.ppo`); acts deterministically by default. torch is imported
   only when one is loaded.
+* :class:`RolloutAgent` -- a discrete successor policy improved at every decision by one-step
+  lookahead in the model its observation shows (the rollout algorithm, the policy as base policy).
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ from typing import Any, Protocol, cast, runtime_checkable
 import gymnasium as gym
 import numpy as np
 
-from soaring_env._validation import ConfigError, check_finite, check_positive, check_range
+from soaring_env._validation import ConfigError, check_finite, check_int, check_positive, check_range
 from soaring_env.primitives import COL_AIRSPEED, COL_CHI_DOT_1, COL_CHI_DOT_2, COL_FAMILY, COL_GAMMA, SPIRAL
 
 __all__ = [
@@ -38,6 +40,7 @@ __all__ = [
     "PPOAgent",
     "RandomAgent",
     "ReplayAgent",
+    "RolloutAgent",
     "SSTPlannerAgent",
     "ThermallingAgent",
     "action_mask_of",
@@ -598,6 +601,94 @@ class PPOAgent:
         t, _ = self.model.policy.obs_to_tensor(obs)
         with torch.no_grad():
             return np.asarray(self.model.policy.get_distribution(t).distribution.logits[0].numpy())
+
+
+class RolloutAgent:
+    """A discrete successor policy (:class:`PPOAgent`, ``policy="successor"``) improved at every
+    decision by one-step lookahead in the model its observation shows: Bertsekas' rollout
+    algorithm, the policy's mode as base policy (README, round twenty-one).
+
+    At each step the policy's ``candidates`` likeliest primitives are each flown in a copy of the
+    env whose scenario is rebuilt from the observation alone
+    (:meth:`baselines.scoring.SuccessorFeatures.scenario`: goal, wind and the observed thermal
+    slots, in the aircraft's frame, the last edge's airspeed carried over), the policy's mode
+    flying on to the end; the primitive whose episode reaches the goal within the steps left with
+    the least energy is flown (the likelier one on ties, the mode where none does). Nothing beyond
+    the observation, the aircraft and the primitives is used: where the observed slots hold every
+    thermal (goal reaching with up to 3), the model's episodes are the env's. With one candidate it
+    is the policy itself. Deterministic.
+
+    :param path: a discrete successor run, as for :class:`PPOAgent`.
+    :param candidates: primitives tried per decision (>= 1; about 6 ms of flight in the model per
+        candidate and step left).
+    :param name: label in results; default ``"ppo-discrete-rollout"``.
+    """
+
+    def __init__(self, path: str | Path, *, candidates: int = 8, name: str | None = None) -> None:
+        self.candidates = check_int("candidates", candidates, 1)
+        self.policy = PPOAgent(path, name=name or "ppo-discrete-rollout")
+        cfg = self.policy.config
+        if self.policy.algo != "discrete" or cfg.get("config", {}).get("policy") != "successor":
+            raise ConfigError(
+                f"{self.policy.model_path}: the rollout agent needs a discrete successor policy "
+                f"(--algo discrete --set 'policy=\"successor\"'), not algo={self.policy.algo!r}, "
+                f"policy={cfg.get('config', {}).get('policy')!r}"
+            )
+        self.name = self.policy.name
+        self.env_id = self.policy.env_id
+        self.features: Any = self.policy.model.policy.mlp_extractor.policy_net.features
+        self._inner: gym.Env | None = None  # the model: the same env, on rebuilt scenarios
+        self._steps = 0
+
+    def reset(self, env: gym.Env, seed: int | None = None) -> None:
+        """Remember ``env``'s settings (the model is the same env with them) and start counting steps."""
+        self.policy.reset(env, seed)
+        if env.spec is None:
+            raise ConfigError(f"{self.name} needs an env made by gym.make (its model is made the same way)")
+        if self._inner is None or self._inner.spec != env.spec:
+            if self._inner is not None:
+                self._inner.close()
+            self._inner = gym.make(env.spec)
+        self._steps = 0
+
+    def _fly(self, scenario: Any, first: int, airspeed_prev: float | None, steps_left: float) -> float:
+        """Energy [J/kg] of ``first`` then the policy's mode in the model from ``scenario``'s start
+        (inf: no goal within ``steps_left`` steps)."""
+        assert self._inner is not None
+        obs, _ = self._inner.reset(seed=0, options={"scenario": scenario, "airspeed_prev": airspeed_prev})
+        a, n = first, 0
+        while True:
+            obs, _, terminated, truncated, info = self._inner.step(a)
+            n += 1
+            if terminated or truncated or n >= steps_left:
+                break
+            a = int(np.argmax(self.policy.logits(obs)))
+        return float(info["energy_spent"]) if info.get("is_success") else math.inf
+
+    def predict(
+        self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True
+    ) -> tuple[Any, None]:
+        """The primitive whose episode in the model spends least (see the class docstring)."""
+        if self._inner is None:
+            raise RuntimeError(f"{self.name}.predict called before reset(env, seed)")
+        z = self.policy.logits(observation)
+        order = [int(a) for a in np.argsort(-z, kind="stable")[: self.candidates]]  # likeliest first
+        best = order[0]
+        if len(order) > 1:
+            fn = self.policy._obs_fn
+            x = np.asarray(fn(observation) if fn is not None else observation, np.float64).ravel()
+            lay = self.features.layout
+            v_prev = float(x[lay.airspeed]) * lay.speed_scale  # 0: no edge flown yet
+            scenario = self.features.scenario(x)
+            limit = self._inner.unwrapped.episode_steps  # type: ignore[attr-defined]
+            steps_left = math.inf if limit is None else limit - self._steps
+            cost = math.inf
+            for a in order:
+                c = self._fly(scenario, a, v_prev if v_prev > 0.0 else None, steps_left)
+                if c < cost:
+                    best, cost = a, c
+        self._steps += 1
+        return np.int64(best), None
 
 
 class SSTPlannerAgent:

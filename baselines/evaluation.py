@@ -43,7 +43,7 @@ from baselines._runs import holds_dir_lock, progress_bar, read_json
 from baselines.backends import check_backend, run_jobs
 from baselines.reference.bounds import regret
 from baselines.reference.yardstick import ScenarioReference
-from soaring_env._validation import ConfigError
+from soaring_env._validation import ConfigError, check_int
 from soaring_env.scenario import HELDOUT_SEED0 as HELDOUT_SEED0
 from soaring_env.scenario import Scenario, atomic_write_text, check_scenario_name
 from soaring_env.scenario import get_scenario as resolve_scenario
@@ -65,6 +65,7 @@ AGENT_NAMES = (
     "sst-seeded-primitives",
     "sst-seeded-continuous",
     "ppo-discrete",
+    "ppo-discrete-rollout",
     "ppo-masked",
     "ppo-continuous",
     "ppo-grid",
@@ -84,7 +85,16 @@ REWARD_ONLY_KWARGS = (
     "settle_height",
 )
 #: PPO agent name -> training algorithm (see :data:`baselines.ppo.ALGOS`).
-PPO_AGENTS = {"ppo-discrete": "discrete", "ppo-masked": "masked", "ppo-continuous": "continuous", "ppo-grid": "grid"}
+PPO_AGENTS = {
+    "ppo-discrete": "discrete",
+    "ppo-discrete-rollout": "discrete",  # the discrete successor policy improved online (RolloutAgent)
+    "ppo-masked": "masked",
+    "ppo-continuous": "continuous",
+    "ppo-grid": "grid",
+}
+#: PPO agents that fly a run's policy with decision-time lookahead, not as it is (opt-in: a run
+#: directory is never picked up for them by default).
+ROLLOUT_AGENTS = ("ppo-discrete-rollout",)
 #: Which saved model of a PPO run an agent uses (:func:`ppo_model_path`).
 PPO_MODELS = ("best", "final", "bc")
 
@@ -103,6 +113,8 @@ class EvalConfig:
     :param ppo_model: ``"best"`` (best validation return during training), ``"final"`` or ``"bc"``.
     :param env_kwargs: extra ``gym.make`` keywords for every env (must match PPO training).
     :param keep_paths: store the flown path of every episode (for trajectory plots).
+    :param rollout_candidates: primitives the rollout agents try per decision
+        (:class:`baselines.agents.RolloutAgent`; 8 measured on ``val100``, README round twenty-one).
     """
 
     agents: tuple[str, ...] = ("sst-primitives", "sst-continuous", "heuristic", "random")
@@ -114,8 +126,10 @@ class EvalConfig:
     ppo_model: str = "best"
     env_kwargs: Mapping[str, Any] = field(default_factory=dict)
     keep_paths: bool = True
+    rollout_candidates: int = 8
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "rollout_candidates", check_int("rollout_candidates", self.rollout_candidates, 1))
         object.__setattr__(self, "agents", tuple(self.agents))
         object.__setattr__(self, "scenarios", tuple(self.scenarios))
         object.__setattr__(self, "seeds", tuple(int(s) for s in self.seeds))
@@ -238,13 +252,23 @@ def agent_spec(name: str, config: EvalConfig) -> AgentSpec:
         if cfg.get("algo") != algo:
             raise ConfigError(f"agent {name!r} needs a {algo!r} model, but {run_dir} holds {cfg.get('algo')!r}")
 
-        def make_ppo() -> Any:
-            from baselines.agents import PPOAgent
+        settings = {"model": str(path), "sha256": file_digest(path)}
+        if name in ROLLOUT_AGENTS:
+            if cfg.get("config", {}).get("policy") != "successor":
+                raise ConfigError(
+                    f"agent {name!r} needs a successor policy (--set 'policy=\"successor\"'), but {run_dir} holds "
+                    f"policy={cfg.get('config', {}).get('policy')!r}"
+                )
+            settings["rollout_candidates"] = config.rollout_candidates
 
+        def make_ppo() -> Any:
+            from baselines.agents import PPOAgent, RolloutAgent
+
+            if name in ROLLOUT_AGENTS:
+                return RolloutAgent(path, candidates=config.rollout_candidates, name=name)
             return PPOAgent(path, name=name)
 
         own = ppo_env_kwargs(cfg)
-        settings = {"model": str(path), "sha256": file_digest(path)}
         if own:
             settings["env_kwargs"] = own
         return AgentSpec(name, cfg["env_id"], make_ppo, settings, own)

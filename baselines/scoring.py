@@ -43,6 +43,7 @@ from torch import nn
 from soaring_env._validation import ConfigError
 from soaring_env.physics.thermals import WindField
 from soaring_env.primitives import COL_AIRSPEED, COL_CHI_DOT_1, COL_CHI_DOT_2, COL_FAMILY, COL_GAMMA, Rollout, rollout
+from soaring_env.scenario import Bounds, GoalRegion, Scenario
 
 #: Samples of each primitive's path the lift estimate is averaged over (every 3 s of a 30 s edge).
 N_PATH_SAMPLES = 10
@@ -452,6 +453,24 @@ class SuccessorFeatures:
         wa, wr = (float(obs[i]) * lay.wind_scale for i in lay.wind)
         return WindField(thermals=tuple(ths), zi=self.zi, wind_north=wa, wind_east=wr)
 
+    def scenario(self, obs: np.ndarray) -> Scenario:
+        """The goal-reaching scenario one body-frame observation (float64) shows, in the aircraft's
+        frame (ahead = north, course 0; positions [m]): the start at the observed height, the goal
+        at its observed offset (``goal_radius``), the observed thermal slots and wind
+        (:meth:`field`). The domain's bounds are not in the observation: 100 km either way, the
+        ceiling ``height_max``."""
+        lay = self.layout
+        h = float(obs[lay.height]) * lay.height_scale
+        ga, gr = (float(obs[i]) * lay.position_scale for i in lay.goal[:2])
+        gu = float(obs[lay.goal[2]]) * lay.height_scale
+        far = 1e5
+        return Scenario(
+            field=self.field(obs),
+            start=(0.0, 0.0, 0.0, min(max(h, 1.0), self.height_max)),
+            goal=GoalRegion(north=ga, east=gr, height=max(h + gu, 1.0), radius=self.goal_radius),
+            bounds=Bounds(north_min=-far, north_max=far, east_min=-far, east_max=far, height_max=self.height_max),
+        )
+
     def flown(self, obs: np.ndarray) -> Rollout:
         """The 174 primitives flown from one body-frame observation (float64) through the field it
         shows: states ``[Pn, Pe, chi, h]`` in the aircraft's frame (ahead = north, course 0) [m, m,
@@ -549,19 +568,9 @@ class SuccessorFeatures:
         distances and climb values from a few thousand plans."""
         from baselines.reference.beam import cost_to_go_estimate, still_air_cost_per_metre, thermal_values
         from soaring_env.model import SoaringModel
-        from soaring_env.scenario import Bounds, GoalRegion, Scenario
 
-        lay = self.layout
-        h = float(obs[lay.height]) * lay.height_scale
-        ga, gr = (float(obs[i]) * lay.position_scale for i in lay.goal[:2])
-        gu = float(obs[lay.goal[2]]) * lay.height_scale
-        far = 1e5
-        scen = Scenario(
-            field=self.field(obs),
-            start=(0.0, 0.0, 0.0, min(max(h, 1.0), self.height_max)),
-            goal=GoalRegion(north=ga, east=gr, height=max(h + gu, 1.0), radius=self.goal_radius),
-            bounds=Bounds(north_min=-far, north_max=far, east_min=-far, east_max=far, height_max=self.height_max),
-        )
+        h = float(obs[self.layout.height]) * self.layout.height_scale
+        scen = self.scenario(obs)
         model = SoaringModel(scenario=scen, aircraft=self.aircraft, library=self.library, max_substep=self.max_substep)
         ctrls = np.arange(len(self.library), dtype=np.float64)[:, None]
         hb = round(h / 10.0)  # the still-air cost per metre barely changes with height: one per 10 m band
@@ -576,7 +585,7 @@ class SuccessorFeatures:
         d_goal = np.maximum(np.hypot(end[:, 0] - g.north, end[:, 1] - g.east) - g.radius, 0.0)
         est = cost_to_go_estimate(end, d_goal, per_metre, g_top, lift, (g.north, g.east))
         straight = per_metre * d_goal
-        k = len(lay.thermals)
+        k = len(self.layout.thermals)
         detours = np.tile(straight[:, None], (1, max(k, len(lift))))
         for j, row in enumerate(lift):
             detours[:, j] = cost_to_go_estimate(end, d_goal, per_metre, g_top, row[None, :], (g.north, g.east))

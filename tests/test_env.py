@@ -628,3 +628,32 @@ def test_settle_height_makes_a_truncated_flight_pay_as_if_it_ended_at_the_goal_t
         gym.make("soaring/ThermalClimbContinuous-v0", settle_height=True)
     for env in (*plain, *settled, vec):
         env.close()
+
+
+def test_reset_with_the_last_airspeed_resumes_mid_flight() -> None:
+    """``reset(options={"airspeed_prev": v})``: an episode started at a state reached mid-flight
+    flies its next edge exactly as the original episode does (the speed change paid, the observed
+    airspeed shown); without it the first edge pays no speed change. Bad values name the option."""
+    env = gym.make(ENV_ID)
+    base = env.unwrapped
+    sc = paper_scenario()
+    env.reset(options={"scenario": sc})
+    env.step(2)  # straight, level, 10 m/s
+    v = float(base.airspeed_prev)
+    resumed = sc.replace(start=tuple(float(s) for s in base.state))
+    *_, flown = env.step(7)  # straight, level, 20 m/s: a speed change
+    obs, _ = env.reset(options={"scenario": resumed, "airspeed_prev": v})
+    names = list(base.observation_names)
+    assert v == 10.0 and obs[names.index("airspeed")] * base.config.speed_scale == pytest.approx(v)
+    *_, again = env.step(7)
+    assert flown["kinetic"] > 0.0
+    for key in ("edge_cost", "fuel", "kinetic", "potential", "height"):
+        assert again[key] == pytest.approx(flown[key], rel=1e-9, abs=1e-9), key
+    env.reset(options={"scenario": resumed})
+    *_, fresh = env.step(7)
+    assert fresh["kinetic"] == 0.0
+    for bad in ("fast", -1.0, 0.0, float("nan"), True, [12.0]):
+        with pytest.raises(ConfigError, match="airspeed_prev"):
+            env.reset(options={"scenario": "paper", "airspeed_prev": bad})
+    with pytest.raises(ConfigError, match="allowed: 'scenario', 'airspeed_prev'"):
+        env.reset(options={"scenery": "paper"})

@@ -79,6 +79,47 @@ def test_ppo_agent_without_a_model_is_refused(tmp_path: Path) -> None:
         agent_spec("ppo-masked", EvalConfig(agents=("ppo-masked",), ppo_dirs={"ppo-masked": str(tmp_path)}))
 
 
+def test_rollout_agent_is_opt_in_checked_and_evaluated(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``ppo-discrete-rollout`` (README, round twenty-one): its candidate count is checked and
+    recorded with its episodes (a change redoes them on resume); a run that is not a successor
+    policy is refused; ``scripts/evaluate.py`` flies it (committed run ``a3-s0``) and never picks
+    a run directory up for it by default."""
+    run = str(Path(__file__).resolve().parents[1] / "results" / "ppo-score" / "a3-s0" / "discrete")
+    name = "ppo-discrete-rollout"
+    for bad in (0, True, 2.5, "8"):
+        with pytest.raises(ConfigError, match="rollout_candidates"):
+            EvalConfig(agents=(name,), ppo_dirs={name: run}, rollout_candidates=bad)  # type: ignore[arg-type]
+    spec = agent_spec(name, EvalConfig(agents=(name,), ppo_dirs={name: run}, ppo_model="final", rollout_candidates=3))
+    assert spec.settings["rollout_candidates"] == 3
+    other = tmp_path / "other"
+    other.mkdir()
+    cfg = json.loads((Path(run) / "config.json").read_text())
+    cfg["config"]["policy"] = "mlp"
+    (other / "config.json").write_text(json.dumps(cfg))
+    (other / "model.zip").write_bytes((Path(run) / "model.zip").read_bytes())
+    with pytest.raises(ConfigError, match="needs a successor policy"):
+        agent_spec(name, EvalConfig(agents=(name,), ppo_dirs={name: str(other)}, ppo_model="final"))
+    main = _script("evaluate").main
+    out = tmp_path / "ev"
+    argv = ["--agents", "ppo-discrete", name, "--scenarios", "random-10", "--seeds", "0", "--ppo-model", "final"]
+    argv += ["--ppo-dir", f"ppo-discrete={run}", "--ppo-dir", f"{name}={run}", "--out", str(out), "--quiet"]
+    assert main([*argv, "--rollout-candidates", "4"]) == 0
+    eps = {e["agent"]: e for e in load_results(out)["episodes"]}
+    assert eps[name]["success"] and eps[name]["energy_spent"] <= eps["ppo-discrete"]["energy_spent"]
+    assert main([*argv, "--rollout-candidates", "0"]) == 2
+    assert "rollout_candidates=0" in capsys.readouterr().err
+    root = tmp_path / "root"
+    (root / "discrete").mkdir(parents=True)
+    for f in ("config.json", "model.zip"):
+        (root / "discrete" / f).write_bytes((Path(run) / f).read_bytes())
+    argv = ["--scenarios", "paper", "--seeds", "0", "--ppo-root", str(root), "--ppo-model", "final"]
+    argv += ["--sst-budget", "none", "--sst-iterations", "20", "--out", str(tmp_path / "all"), "--quiet"]
+    assert main(argv) == 0  # every agent by default: the run is picked up as ppo-discrete only
+    ran = {e["agent"] for e in load_results(tmp_path / "all")["episodes"]}
+    assert "ppo-discrete" in ran and name not in ran
+    assert main(["--list"]) == 0 and name in capsys.readouterr().out
+
+
 def test_heldout_scenarios_are_seeded_and_named() -> None:
     names = heldout_names(3)
     assert names == ["random-10000", "random-10001", "random-10002"]

@@ -12,7 +12,7 @@ import pytest
 
 EXAMPLES = sorted((Path(__file__).resolve().parents[1] / "examples").glob("*.py"))
 #: Modules an example needs beyond the core install, by file name.
-NEEDS = {"04_train_ppo.py": ("torch", "sb3_contrib")}
+NEEDS = {"04_train_ppo.py": ("torch", "sb3_contrib"), "07_rollout_agent.py": ("torch",)}
 #: A line each example must print (a sign that it did its job, not only that it exited 0).
 EXPECT = {
     "01_quickstart.py": "heuristic",
@@ -21,6 +21,7 @@ EXPECT = {
     "04_train_ppo.py": "trained",
     "05_scenarios.py": "is unknown; known: paper",
     "06_tasks.py": "reference search:",
+    "07_rollout_agent.py": "with the rollout goal",
 }
 
 

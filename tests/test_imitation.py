@@ -1592,3 +1592,75 @@ def test_diagnose_clone_consistency(ref_dir: Path, tmp_path: Path, capsys: pytes
         with pytest.raises(SystemExit):
             dc.main(argv)
         assert msg in capsys.readouterr().err
+
+
+def test_rollout_agent_is_one_step_lookahead_in_the_model_the_observation_shows(ref_dir: Path, tmp_path: Path) -> None:
+    """``RolloutAgent`` (README, round twenty-one): with one candidate it flies the policy itself;
+    where the observed slots hold every thermal, each candidate's episode in the model rebuilt from
+    the observation (the last airspeed carried over) spends what the same episode spends in the
+    env, from the start and mid-flight; it flies the cheapest of them (the likeliest on ties, the
+    mode where none reaches the goal); deterministic; bad settings and policies are refused."""
+    from baselines.agents import PPOAgent, RolloutAgent
+    from baselines.evaluation import make_env, ppo_env_kwargs, run_episode
+    from baselines.imitation import _fly_mode
+
+    kw = {"policy": "successor", "scorer_hidden": (8,), "demo_epochs": 5}
+    run = train(dataclasses.replace(_tiny_run("discrete", ref_dir, **kw), total_timesteps=0), tmp_path / "run")
+    plain = PPOAgent(run)
+    env = make_env(plain.env_id, ppo_env_kwargs(plain.config))
+    one = RolloutAgent(run, candidates=1)
+    for name in ("random-3", "random-5"):
+        a, b = (run_episode(env, agent, get_scenario(name), 0, keep_path=True) for agent in (plain, one))
+        assert a == {**b, **{k: a[k] for k in a if k.startswith("compute")}}
+    # a policy that reaches the goal: round nineteen's a3-s0 (committed)
+    flier = Path(__file__).resolve().parents[1] / "results" / "ppo-score" / "a3-s0" / "discrete"
+    plain = PPOAgent(flier)
+    three = RolloutAgent(flier, candidates=3)
+    checked = departs = 0
+    for name in ("random-3", "random-5", "random-8"):  # 2, 1 and 2 thermals: all in the 3 observed slots
+        sc = get_scenario(name)
+        mode = _fly_mode(env, plain.logits, sc, (), 3)
+        for t in range(min(3, len(mode["actions"]))):  # from the start and mid-flight
+            prefix = mode["actions"][:t]
+            obs, _ = env.reset(seed=0, options={"scenario": sc})
+            three.reset(env, 0)
+            for a in prefix:
+                three.predict(obs)  # the agent counts the steps flown
+                obs, *_ = env.step(a)
+            spent = float(env.unwrapped.energy_spent)
+            x = plain._obs_fn(obs) if plain._obs_fn is not None else obs
+            feats = three.features
+            v = float(x[feats.layout.airspeed]) * feats.layout.speed_scale
+            model_sc = feats.scenario(np.asarray(x, np.float64))
+            costs = []
+            for cand in mode["options"][t]:
+                ep = _fly_mode(env, plain.logits, sc, [*prefix, cand], 1)
+                in_model = three._fly(model_sc, cand, v if v > 0.0 else None, MAX_EPISODE_STEPS - t)
+                if ep["success"]:
+                    assert in_model == pytest.approx(ep["energy_spent"] - spent, abs=0.5)  # [J/kg]; float32 obs
+                    checked += 1
+                else:
+                    assert in_model == math.inf
+                costs.append(in_model)
+            obs, _ = env.reset(seed=0, options={"scenario": sc})
+            three.reset(env, 0)
+            for a in prefix:
+                three.predict(obs)
+                obs, *_ = env.step(a)
+            want = mode["options"][t][int(np.argmin(costs))]  # the first of the cheapest; the mode if none reached
+            assert int(three.predict(obs)[0]) == want
+            departs += want != mode["options"][t][0]
+    assert checked >= 20 and departs >= 3, (checked, departs)  # 27 and 6 when written
+    first, again = (run_episode(env, RolloutAgent(flier, candidates=3), get_scenario("random-6"), 0) for _ in range(2))
+    assert {k: v for k, v in first.items() if not k.startswith("compute")} == {
+        k: v for k, v in again.items() if not k.startswith("compute")
+    }
+    for bad in (0, True, 2.5, "8"):
+        with pytest.raises(ConfigError, match="candidates"):
+            RolloutAgent(run, candidates=bad)  # type: ignore[arg-type]
+    other = train(dataclasses.replace(_tiny_run("discrete", ref_dir, demo_epochs=1), total_timesteps=0), tmp_path / "o")
+    with pytest.raises(ConfigError, match="successor policy"):
+        RolloutAgent(other)
+    with pytest.raises(RuntimeError, match="before reset"):
+        RolloutAgent(run).predict(obs)
+    env.close()

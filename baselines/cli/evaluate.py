@@ -6,6 +6,10 @@ Examples::
     python scripts/evaluate.py --heldout 20 --seeds 0 1 2 --sst-budget 20 --out results/eval
     # a quick look (into results/eval-local, never the committed results)
     python scripts/evaluate.py --agents heuristic random --heldout 5
+    # a discrete successor run as it is and improved online by one-step lookahead (README, round twenty-one)
+    python scripts/evaluate.py --agents ppo-discrete ppo-discrete-rollout --ppo-model final \
+        --ppo-dir ppo-discrete=results/ppo-score/a3-s0/discrete \
+        --ppo-dir ppo-discrete-rollout=results/ppo-score/a3-s0/discrete
     # deterministic SST (iteration budget instead of wall clock)
     python scripts/evaluate.py --agents sst-primitives --sst-budget none --sst-iterations 2000
     # the episodes in parallel: 4 local worker processes, or every CPU of a running Ray cluster
@@ -30,6 +34,7 @@ from baselines.evaluation import (
     AGENT_NAMES,
     PPO_AGENTS,
     PPO_MODELS,
+    ROLLOUT_AGENTS,
     EvalConfig,
     attach_regret,
     heldout_names,
@@ -66,6 +71,12 @@ def main(argv: list[str] | None = None) -> int:
         help="which saved PPO model to use (bc: the behaviour-cloned start of a run with demos)",
     )
     p.add_argument(
+        "--rollout-candidates",
+        type=int,
+        default=8,
+        help="primitives ppo-discrete-rollout tries per decision (default 8; 1: the policy itself)",
+    )
+    p.add_argument(
         "--out",
         default="results/eval-local",
         help="output directory (default results/eval-local, not tracked; the README's committed results "
@@ -92,7 +103,7 @@ def main(argv: list[str] | None = None) -> int:
     ppo_dirs: dict[str, str] = {}
     root = Path(args.ppo_root)
     for agent, algo in PPO_AGENTS.items():
-        if ppo_model_path(root / algo, args.ppo_model).is_file():
+        if agent not in ROLLOUT_AGENTS and ppo_model_path(root / algo, args.ppo_model).is_file():
             ppo_dirs[agent] = str(root / algo)
     for item in args.ppo_dir:
         if "=" not in item:
@@ -123,6 +134,7 @@ def main(argv: list[str] | None = None) -> int:
             sst_iterations=args.sst_iterations,
             ppo_dirs={k: v for k, v in ppo_dirs.items() if k in agents},
             ppo_model=args.ppo_model,
+            rollout_candidates=args.rollout_candidates,
         )
         results = run_evaluation(
             cfg,

@@ -257,6 +257,7 @@ def choose_scenario(
     fixed: Scenario | None,
     random_kwargs: Mapping[str, Any],
     generator: Callable[..., Scenario] = make_scenario,
+    more_keys: tuple[str, ...] = (),
 ) -> Scenario | None:
     """The scenario of a new episode, or ``None`` for a new random one.
 
@@ -264,15 +265,17 @@ def choose_scenario(
     the configured ``fixed`` scenario; else (``"random"`` mode, or ``options={"scenario": "random"}``)
     ``None``: the env draws from its own generator (``generator`` with ``random_kwargs``; goal
     reaching: distribution v2 of :mod:`soaring_env.env.scenario_batch`). ``random_kwargs`` are also
-    the keywords of that generator's ``<family>-<seed>`` names.
+    the keywords of that generator's ``<family>-<seed>`` names. ``more_keys``: further reset
+    options the caller reads itself (allowed here, not interpreted).
     """
     spec: Any = None
+    allowed = ("scenario", *more_keys)
     if options:
         if not isinstance(options, Mapping):
-            raise ConfigError(f"options={options!r} must be a dict; allowed key: 'scenario'")
-        unknown = sorted(set(options) - {"scenario"})
+            raise ConfigError(f"options={options!r} must be a dict; allowed keys: {', '.join(map(repr, allowed))}")
+        unknown = sorted(set(options) - set(allowed))
         if unknown:
-            raise ConfigError(f"unknown reset option(s) {unknown!r}; allowed: 'scenario'")
+            raise ConfigError(f"unknown reset option(s) {unknown!r}; allowed: {', '.join(map(repr, allowed))}")
         spec = options.get("scenario")
     if spec is not None:
         return resolve_scenario(spec, random_kwargs, generator)  # None for "random"

@@ -15,7 +15,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from soaring_env._validation import ConfigError
+from soaring_env._validation import ConfigError, check_positive
 from soaring_env.env._kernels import CRASH, FLYING, GOAL, OUT_OF_BOUNDS, step_rows
 from soaring_env.env.config import ENERGY_SCALE, SoaringEnvConfig, choose_scenario, make_config, resolve_scenario
 from soaring_env.env.observation import (
@@ -149,7 +149,9 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
     draws thermal count, positions, strengths, wind, start and goal from ``env.np_random``.
     ``reset(options={"scenario": s})`` pins a scenario for that episode: a Scenario, its dict,
     ``"random"``, or a name of :func:`~soaring_env.scenario.get_scenario` (``"paper"``,
-    ``"random-<seed>"``, a path to a scenario ``.json`` file) -- the same forms as ``scenario=``.
+    ``"random-<seed>"``, a path to a scenario ``.json`` file) -- the same forms as ``scenario=``;
+    ``options["airspeed_prev"]`` [m/s] (single envs) starts it as if an edge at that airspeed had
+    just been flown (a start mid-flight: the first edge pays the speed change).
     Random scenarios follow distribution v2 (:mod:`soaring_env.env.scenario_batch`: the ranges of
     :func:`~soaring_env.scenario.make_scenario`, drawn as the batched vector env draws them, so
     ``gym.make_vec(..., num_envs=n)`` equals n single envs); ``"random-<seed>"`` names stay v1.
@@ -455,11 +457,11 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         sampler.draw_from(_ZERO_ROW, self.np_random, prm, th, nth, start)
         return scenario_from_row(sampler.spec, prm[0], th[0, : nth[0]], start[0])
 
-    def _start_episode(self) -> tuple[np.ndarray, dict[str, Any]]:
+    def _start_episode(self, airspeed_prev: float = math.nan) -> tuple[np.ndarray, dict[str, Any]]:
         sc = self.scenario
         self.state = sc.start_state
         self.time = 0.0
-        self.airspeed_prev = math.nan
+        self.airspeed_prev = airspeed_prev
         self.energy_spent = 0.0
         self.steps = 0
         self.outcome = "flying"
@@ -474,7 +476,7 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         observe_batch(
             self.state[None, :],
             np.zeros(1),
-            np.full(1, np.nan),
+            np.full(1, airspeed_prev),
             self._lift,
             self._prm,
             self._th,
@@ -519,15 +521,23 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
 
     # --- gymnasium API -------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
-        """Start an episode; ``options={"scenario": Scenario | name | dict | "random"}`` pins a scenario."""
+        """Start an episode; ``options={"scenario": Scenario | name | dict | "random"}`` pins a scenario.
+
+        ``options["airspeed_prev"]`` [m/s] starts the episode as if an edge at that airspeed had just
+        been flown (the first edge then pays the speed change, and the observation shows it): a start
+        mid-flight, as in a model rebuilt from an observation (:class:`baselines.agents.RolloutAgent`).
+        Without it the first edge pays no speed change."""
         super().reset(seed=seed)
         cfg = self.config
-        sc = choose_scenario(options, self._fixed_scenario, cfg.random_scenario, cfg.generator)
+        sc = choose_scenario(options, self._fixed_scenario, cfg.random_scenario, cfg.generator, ("airspeed_prev",))
+        v_prev = (options or {}).get("airspeed_prev")
+        if v_prev is not None:
+            v_prev = check_positive("options['airspeed_prev']", v_prev)
         if sc is None:
             sc = self._draw_random()
         if sc is not self.scenario:
             self._install(sc)
-        obs, info = self._start_episode()
+        obs, info = self._start_episode(math.nan if v_prev is None else v_prev)
         self._needs_reset = False
         if self.render_mode == "human":
             self.render()
