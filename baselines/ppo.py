@@ -23,7 +23,8 @@ Training draws a new random scenario from each env's ``np_random`` at every rese
 held-out test seeds ``HELDOUT_SEED0 + k`` of :mod:`baselines.evaluation`.
 
 A run directory holds ``model.zip`` (final), ``best_model.zip`` (best validation return),
-``config.json`` (the exact :class:`TrainConfig`, library versions, timings), ``evaluations.npz``
+``config.json`` (the exact :class:`TrainConfig`, library versions, timings; ``status`` "running",
+"done", or "failed" with the ``error`` that ended the run), ``evaluations.npz``
 (SB3's EvalCallback log), ``eval_log.json`` (the same per evaluation with success rate, energy and
 wall-clock time), ``learning_curve.png``, ``checkpoints/`` and, optionally, ``tb/`` (TensorBoard).
 
@@ -1582,8 +1583,12 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
             signals.restore()
             train_env.close()
             eval_env.close()
-    except BaseException:
+    except BaseException as exc:
         signals.restore()
+        # the record says the run failed and why, rather than "running" for ever
+        failed = {"finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "error": f"{type(exc).__name__}: {exc}"}
+        record.update(status="failed", **failed)
+        atomic_write_text(out / "config.json", json.dumps(record, indent=2))
         raise
     if signals.received is not None:
         print(f"[train_ppo] {signals.received}: stopped early; saving the model", file=sys.stderr)

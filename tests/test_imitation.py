@@ -668,6 +668,8 @@ def test_ensemble_of_averages_the_members_logits(
     )
     with pytest.raises(ValueError, match=r"ensemble_of\[1\].*differs in: hidden"):
         train(ens((str(runs[0]), str(other))), tmp_path / "bad")
+    record = json.loads((tmp_path / "bad" / "config.json").read_text())  # the failed run says so, and why
+    assert record["status"] == "failed" and "ensemble_of[1]" in record["error"] and "finished" in record
     from baselines.cli.train_ppo import main  # the same refusal from the command line: a usage error, no traceback
 
     members = json.dumps([str(runs[0]), str(other)])
