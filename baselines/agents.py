@@ -566,6 +566,10 @@ class PPOAgent:
         self._act_fn = action_transform(self.config)
         self._env: gym.Env | None = None
 
+    def policy_observation(self, observation: Any) -> Any:
+        """``observation`` as the policy sees it: after the run's observation transform (e.g. the body frame)."""
+        return self._obs_fn(observation) if self._obs_fn is not None else observation
+
     def reset(self, env: gym.Env, seed: int | None = None) -> None:
         """Remember ``env`` (for its action space and action masks); the policy is deterministic."""
         if env.spec is not None and env.spec.id.split(":")[-1] != self.env_id.split(":")[-1]:
@@ -577,7 +581,7 @@ class PPOAgent:
     ) -> tuple[Any, Any]:
         """The policy's action; masked PPO also passes the env's current action mask."""
         det = self.deterministic if deterministic is None else deterministic
-        obs = self._obs_fn(observation) if self._obs_fn is not None else observation
+        obs = self.policy_observation(observation)
         kwargs: dict[str, Any] = {}
         if self.algo == "masked":
             if self._env is None:
@@ -597,8 +601,7 @@ class PPOAgent:
             raise ConfigError(f"{self.name}: logits need a discrete policy, not algo={self.algo!r}")
         import torch
 
-        obs = self._obs_fn(observation) if self._obs_fn is not None else observation
-        t, _ = self.model.policy.obs_to_tensor(obs)
+        t, _ = self.model.policy.obs_to_tensor(self.policy_observation(observation))
         with torch.no_grad():
             return np.asarray(self.model.policy.get_distribution(t).distribution.logits[0].numpy())
 
@@ -675,8 +678,7 @@ class RolloutAgent:
         order = [int(a) for a in np.argsort(-z, kind="stable")[: self.candidates]]  # likeliest first
         best = order[0]
         if len(order) > 1:
-            fn = self.policy._obs_fn
-            x = np.asarray(fn(observation) if fn is not None else observation, np.float64).ravel()
+            x = np.asarray(self.policy.policy_observation(observation), np.float64).ravel()
             lay = self.features.layout
             v_prev = float(x[lay.airspeed]) * lay.speed_scale  # 0: no edge flown yet
             scenario = self.features.scenario(x)
