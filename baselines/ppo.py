@@ -110,7 +110,8 @@ class TrainConfig:
     :param n_steps: rollout length per env and update (n_steps * n_envs samples per update).
     :param batch_size: minibatch size of the PPO epochs.
     :param n_epochs: passes over each rollout.
-    :param gamma: discount; episodes are ~10 steps of 30 s, so a short horizon suffices.
+    :param gamma: discount; episodes are ~10 steps of 30 s. Below 1 the goal bonus rewards arriving
+        sooner: fine-tuning a soaring policy with 0.99, PPO unlearns the circling (README, round twenty-two).
     :param gae_lambda: GAE bias/variance trade-off.
     :param clip_range: PPO ratio clip.
     :param ent_coef: entropy bonus; None: 0.03 for the 174-way discrete policies (with 0.01 they
@@ -211,6 +212,10 @@ class TrainConfig:
     :param demo_rehearsal: with ``demos``: after every PPO update, this many minibatches of the
         demonstrations are fitted again (the actor's log-likelihood, with PPO's own optimizer), so
         that PPO improves on the cloned policy without forgetting it (0: PPO alone).
+    :param critic_warmup: env steps at the start of PPO whose updates train only the value
+        function, the policy's parameters frozen (0, default: none). After ``init_from`` or a cloning
+        the critic starts afresh, and PPO's first updates follow its untrained advantages; a
+        warm-up lets it learn the policy's returns first (README, round twenty-two).
     :param demo_starts: with ``demos``: the share of the training resets that start part-way along
         one of their plans instead of at a random scenario's start (:class:`baselines.imitation.DemoStarts`:
         a plan and a step drawn uniformly, the plan flown to that step), so that PPO practises the
@@ -271,6 +276,7 @@ class TrainConfig:
     demo_lr_final_fraction: float = 1.0
     demo_batch_size: int = 256
     demo_rehearsal: int = 0
+    critic_warmup: int = 0
     demo_starts: float = 0.0
     eval_freq: int = 25_000
     n_eval_scenarios: int = 40
@@ -378,6 +384,8 @@ class TrainConfig:
             raise ValueError(f"demo_rehearsal={self.demo_rehearsal!r} must be an integer >= 0")
         if self.demo_rehearsal and self.demos is None:
             raise ValueError("demo_rehearsal needs demos")
+        if isinstance(self.critic_warmup, bool) or not isinstance(self.critic_warmup, int) or self.critic_warmup < 0:
+            raise ValueError(f"critic_warmup={self.critic_warmup!r} must be an integer >= 0 [env steps]")
         if self.demo_equivalents and self.demos is None:
             raise ValueError("demo_equivalents=True needs demos")
         qw = self.demo_q_weight
@@ -1166,6 +1174,36 @@ def _rehearsal_callback(demos: Any, minibatches: int, batch_size: int, seed: int
     return Rehearsal()
 
 
+#: Parameter-name prefixes of the value function in SB3's actor-critic policies (the rest is the policy's).
+CRITIC_PREFIXES = ("mlp_extractor.value_net.", "value_net.")
+
+
+def _critic_warmup_callback(steps: int) -> Any:
+    """Freeze every parameter of the policy but the value function's for the PPO updates on the
+    first ``steps`` env steps (``TrainConfig.critic_warmup``): those updates move the critic alone."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class CriticWarmup(BaseCallback):
+        def __init__(self) -> None:
+            super().__init__()
+            self.frozen: list[Any] = []
+
+        def _on_training_start(self) -> None:
+            named = self.model.policy.named_parameters()
+            self.frozen = [p for n, p in named if p.requires_grad and not n.startswith(CRITIC_PREFIXES)]
+            for p in self.frozen:
+                p.requires_grad_(False)
+
+        def _on_step(self) -> bool:
+            if self.frozen and self.model.num_timesteps > steps:  # a rollout past the warm-up
+                for p in self.frozen:
+                    p.requires_grad_(True)
+                self.frozen = []
+            return True
+
+    return CriticWarmup()
+
+
 def _wall_clock_callback(max_minutes: float, t_start: float) -> Any:
     from stable_baselines3.common.callbacks import BaseCallback
 
@@ -1562,6 +1600,8 @@ def train(config: TrainConfig, out_dir: str | Path) -> Path:
             callbacks.append(_wall_clock_callback(config.max_minutes, t_start))
         if config.demo_rehearsal:
             callbacks.append(_rehearsal_callback(demos, config.demo_rehearsal, config.batch_size, config.seed))
+        if config.critic_warmup:
+            callbacks.append(_critic_warmup_callback(config.critic_warmup))
         progress = config.progress_bar
         if progress:
             try:

@@ -406,3 +406,31 @@ def test_a_terminated_run_stops_gracefully_and_keeps_its_model(tmp_path: Path) -
     assert record["status"] == "done" and record["stopped_by_signal"] == "SIGTERM"
     assert not record["stopped_by_wall_clock"] and record["timesteps_done"] > 0
     assert (out / "model.zip").is_file()
+
+
+def test_critic_warmup_moves_the_critic_alone(trained: dict[str, Path], tmp_path: Path) -> None:
+    """``critic_warmup``: the PPO updates on the first steps leave every parameter but the value
+    function's exactly as ``init_from`` loaded them; without it the same run moves the policy."""
+    import torch
+
+    from baselines.ppo import CRITIC_PREFIXES, load_model
+
+    for bad in (-1, True, 1.5, "100"):
+        with pytest.raises(ValueError, match="critic_warmup"):
+            TrainConfig(critic_warmup=bad)  # type: ignore[arg-type]
+    start = load_model(trained["discrete"] / "model.zip", "discrete").policy.state_dict()
+    base = dataclasses.replace(
+        _tiny("discrete"), total_timesteps=512, eval_freq=10**6, checkpoint_freq=0, init_from=str(trained["discrete"])
+    )  # two updates of 256 steps
+    runs = {w: train(dataclasses.replace(base, critic_warmup=w), tmp_path / f"w{w}") for w in (0, 256, 512)}
+    after = {w: load_model(run / "model.zip", "discrete").policy.state_dict() for w, run in runs.items()}
+    actor = [n for n in start if not n.startswith(CRITIC_PREFIXES)]
+    critic = [n for n in start if n.startswith(CRITIC_PREFIXES)]
+    assert actor and critic
+    assert all(torch.equal(after[512][n], start[n]) for n in actor)  # both updates: the critic alone
+    assert any(not torch.equal(after[256][n], start[n]) for n in actor)  # the second update moves the policy
+    assert any(not torch.equal(after[0][n], start[n]) for n in actor)
+    for w in (0, 256, 512):
+        assert any(not torch.equal(after[w][n], after[512][n]) for n in actor) == (w != 512)
+    assert any(not torch.equal(after[512][n], start[n]) for n in critic)  # the critic learnt (from afresh)
+    assert json.loads((runs[512] / "config.json").read_text())["config"]["critic_warmup"] == 512
