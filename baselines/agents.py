@@ -609,7 +609,7 @@ class PPOAgent:
 class RolloutAgent:
     """A discrete successor policy (:class:`PPOAgent`, ``policy="successor"``) improved at every
     decision by one-step lookahead in the model its observation shows: Bertsekas' rollout
-    algorithm, the policy's mode as base policy (README, round twenty-one).
+    algorithm, the policy's mode as base policy (docs/learning-to-soar.md, round twenty-one).
 
     At each step the policy's ``candidates`` likeliest primitives are each flown in a copy of the
     env whose scenario is rebuilt from the observation alone

@@ -114,7 +114,7 @@ class EvalConfig:
     :param env_kwargs: extra ``gym.make`` keywords for every env (must match PPO training).
     :param keep_paths: store the flown path of every episode (for trajectory plots).
     :param rollout_candidates: primitives the rollout agents try per decision
-        (:class:`baselines.agents.RolloutAgent`; 8 measured on ``val100``, README round twenty-one).
+        (:class:`baselines.agents.RolloutAgent`; 8 measured on ``val100``, docs/learning-to-soar.md round twenty-one).
     """
 
     agents: tuple[str, ...] = ("sst-primitives", "sst-continuous", "heuristic", "random")

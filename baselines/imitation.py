@@ -1,7 +1,7 @@
 """Behaviour cloning from the reference search: demonstrations that soar, for the PPO agents.
 
 PPO on the goal task finds the straight line within minutes and never the detour through a
-thermal (README, "Agents that learn to soar"): the climb pays only once it has been flown to the
+thermal (docs/learning-to-soar.md): the climb pays only once it has been flown to the
 end, and random exploration around a straight-flying policy does not fly one. The reference search
 (:mod:`baselines.reference`) does: per scenario it returns a plan in the env's own action space
 (continuous ``[-1, 1]^3`` controls or primitive indices) that replays bit for bit through
@@ -285,7 +285,7 @@ class DemoStarts(gym.Wrapper):  # type: ignore[type-arg]
 
     PPO explores from the start of an episode, so a thermal that pays only after the detour, the
     climb and the glide on have all been flown is rarely found; a policy cloned from the plans
-    drifts, and fine-tuning from the scenario start alone unlearns the circling (README, "PPO that
+    drifts, and fine-tuning from the scenario start alone unlearns the circling (docs/learning-to-soar.md, "PPO that
     soars toward a goal"). Starting episodes at the states the plans pass through -- on the way to
     a thermal, in it at every height, on the final glide -- lets PPO practise each stage where the
     plans reach it, and its critic learns what those states are worth, which then shows at the

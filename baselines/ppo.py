@@ -111,7 +111,8 @@ class TrainConfig:
     :param batch_size: minibatch size of the PPO epochs.
     :param n_epochs: passes over each rollout.
     :param gamma: discount; episodes are ~10 steps of 30 s. Below 1 the goal bonus rewards arriving
-        sooner: fine-tuning a soaring policy with 0.99, PPO unlearns the circling (README, round twenty-two).
+        sooner: fine-tuning a soaring policy with 0.99, PPO unlearns the circling
+        (docs/learning-to-soar.md, round twenty-two).
     :param gae_lambda: GAE bias/variance trade-off.
     :param clip_range: PPO ratio clip.
     :param ent_coef: entropy bonus; None: 0.03 for the 174-way discrete policies (with 0.01 they
@@ -178,7 +179,7 @@ class TrainConfig:
         ``.zip`` paths) of successor policies with this run's scorer settings, loaded into one
         policy whose logits are the mean of theirs (each run a member of the scorer; the features are
         computed once for all). E.g. the stages of one chain of tuning rounds, which pick different
-        thermals on many scenarios (README, round twenty). The value function starts fresh as with
+        thermals on many scenarios (docs/learning-to-soar.md, round twenty). The value function starts fresh as with
         ``init_from`` (which cannot be given too), so ``net_arch`` need not be the runs'. Empty
         (default): one scorer.
     :param demos: a folder of reference-search files (``scripts/reference.py --out DIR``): before
@@ -199,7 +200,7 @@ class TrainConfig:
         ``--every``). 1 (default): every row alike.
     :param demo_start_weight: the weight of each plan's row at the scenario's start (a plan flown
         from time 0, not a DAgger plan): the first decision, which picks the thermal a flight heads
-        for (README, round fourteen: a lookahead at that step alone closes half the gap to a
+        for (docs/learning-to-soar.md, round fourteen: a lookahead at that step alone closes half the gap to a
         lookahead at every step), is one row in a plan's seven or so. 1 (default): every row alike.
     :param demo_epochs: passes of the behaviour cloning over the demonstrations (0: none, e.g. to
         rehearse the demonstrations of a policy that ``init_from`` cloned before).
@@ -208,14 +209,14 @@ class TrainConfig:
         steps per pass over the demonstrations at about the same cost per pass).
     :param demo_lr_final_fraction: the cloning's step size falls linearly, minibatch by minibatch,
         from ``demo_learning_rate`` to this fraction of it (1, default: constant). For the
-        successor policy a decay to 2 % fitted worse and flew no better (README, round ten).
+        successor policy a decay to 2 % fitted worse and flew no better (docs/learning-to-soar.md, round ten).
     :param demo_rehearsal: with ``demos``: after every PPO update, this many minibatches of the
         demonstrations are fitted again (the actor's log-likelihood, with PPO's own optimizer), so
         that PPO improves on the cloned policy without forgetting it (0: PPO alone).
     :param critic_warmup: env steps at the start of PPO whose updates train only the value
         function, the policy's parameters frozen (0, default: none). After ``init_from`` or a cloning
         the critic starts afresh, and PPO's first updates follow its untrained advantages; a
-        warm-up lets it learn the policy's returns first (README, round twenty-two).
+        warm-up lets it learn the policy's returns first (docs/learning-to-soar.md, round twenty-two).
     :param demo_starts: with ``demos``: the share of the training resets that start part-way along
         one of their plans instead of at a random scenario's start (:class:`baselines.imitation.DemoStarts`:
         a plan and a step drawn uniformly, the plan flown to that step), so that PPO practises the

@@ -3,7 +3,7 @@
 A plain MLP over the 174 primitives must learn, from the observation alone, which of 174 fixed
 30 s manoeuvres ends in a thermal's core, passes the goal or spirals in lift: a product of the
 thermal offsets, the wind and each primitive's geometry, learnt anew for every output. Cloned from
-the reference plans such policies fly safely but straight (README, rounds four and five: held-out
+the reference plans such policies fly safely but straight (docs/learning-to-soar.md, rounds four and five: held-out
 median regret 1.00-1.06). :class:`PrimitiveScoringPolicy` gives PPO that geometry as an inductive
 bias instead: the logit of primitive ``a`` is one small MLP shared by all primitives,
 
@@ -201,7 +201,8 @@ class PrimitiveScorer(nn.Module):
         self.state_in = nn.Linear(obs_dim, sizes[0])
         self.action_in = nn.Linear(self.n_features, sizes[0], bias=False)
         # a learnt vector per primitive beside its features: what the features miss (the plain
-        # MLP's per-action output weights); without it the cloning fits far worse (README)
+        # MLP's per-action output weights); without it the cloning fits far worse
+        # (docs/learning-to-soar.md, round seven)
         self.action_embedding = nn.Parameter(torch.zeros(len(fixed), sizes[0]))
         layers: list[Any] = []
         for a, b in itertools.pairwise(sizes):
@@ -320,7 +321,7 @@ N_SUCCESSOR_SLOT = 6
 #: turn radius of the primitives' tightest circles (1080 degrees in 30 s at 10-15 m/s: 16-24 m).
 LIFT_RING_M = 20.0
 #: Near-equivalent successors: end points within this [m] of each other, heights within this [m]
-#: and edge costs within this [J/kg] -- e.g. a 360 against a 720 degree circle (README, round twelve).
+#: and edge costs within this [J/kg] -- e.g. a 360 against a 720 degree circle (docs/learning-to-soar.md, round twelve).
 NEAR_POSITION_M = 50.0
 NEAR_HEIGHT_M = 10.0
 NEAR_COST = 20.0
@@ -653,7 +654,7 @@ class SuccessorScorer(nn.Module):
 
     A policy over what each primitive *leads to* rather than over the observation: the cloning
     loss then compares the demonstrated successor with the 173 others the same observation
-    offers, so states the plans never visit are scored too (README, round nine).
+    offers, so states the plans never visit are scored too (docs/learning-to-soar.md, round nine).
     """
 
     def __init__(

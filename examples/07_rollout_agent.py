@@ -6,7 +6,7 @@
 :class:`baselines.agents.RolloutAgent` tries the policy's 8 likeliest primitives at every decision
 in a copy of the env rebuilt from the observation alone (goal, wind, the 3 observed thermals), lets
 the policy's own choice fly on to the goal, and flies the primitive whose episode spends least:
-Bertsekas' rollout algorithm, the policy as base policy (README, round twenty-one). The run is the
+Bertsekas' rollout algorithm, the policy as base policy (docs/learning-to-soar.md, round twenty-one). The run is the
 committed ``results/ppo-score/a3-s0`` (45 min of cloning and lookahead rounds on this machine).
 """
 

@@ -80,7 +80,7 @@ def test_ppo_agent_without_a_model_is_refused(tmp_path: Path) -> None:
 
 
 def test_rollout_agent_is_opt_in_checked_and_evaluated(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """``ppo-discrete-rollout`` (README, round twenty-one): its candidate count is checked and
+    """``ppo-discrete-rollout`` (docs/learning-to-soar.md, round twenty-one): its candidate count is checked and
     recorded with its episodes (a change redoes them on resume); a run that is not a successor
     policy is refused; ``scripts/evaluate.py`` flies it (committed run ``a3-s0``) and never picks
     a run directory up for it by default."""

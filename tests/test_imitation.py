@@ -1076,7 +1076,7 @@ def test_demos_cli_self_imitation_keeps_better_sampled_episodes_and_resumes(
 ) -> None:
     """``--self-imitate``: a kept plan is a sampled episode that beats the mode by the margin and
     replays to its cost; the log records every scenario; a rerun resumes; bad options are refused.
-    The policy is a published clone (README round eleven's ``m3-s0``): a tiny one reaches no goal."""
+    The policy is a published clone (docs/learning-to-soar.md round eleven's ``m3-s0``): a tiny one reaches no goal."""
     from baselines.cli.demos import main
 
     run = Path(__file__).resolve().parents[1] / "results" / "ppo-score" / "m3-s0" / "discrete"
@@ -1597,7 +1597,7 @@ def test_diagnose_clone_consistency(ref_dir: Path, tmp_path: Path, capsys: pytes
 
 
 def test_rollout_agent_is_one_step_lookahead_in_the_model_the_observation_shows(ref_dir: Path, tmp_path: Path) -> None:
-    """``RolloutAgent`` (README, round twenty-one): with one candidate it flies the policy itself;
+    """``RolloutAgent`` (docs/learning-to-soar.md, round twenty-one): with one candidate it flies the policy itself;
     where the observed slots hold every thermal, each candidate's episode in the model rebuilt from
     the observation (the last airspeed carried over) spends what the same episode spends in the
     env, from the start and mid-flight; it flies the cheapest of them (the likeliest on ties, the

@@ -1,4 +1,4 @@
-"""Diagnose a cloned primitive policy (README, round ten): where does its regret come from?
+"""Diagnose a cloned primitive policy (docs/learning-to-soar.md, round ten): where does its regret come from?
 
 Measurements for the successor policies of ``scripts/train_ppo.py --algo discrete --set
 'policy="successor"'`` and their demonstrations, each written as JSON (``--out``) and printed:
@@ -18,7 +18,7 @@ Measurements for the successor policies of ``scripts/train_ppo.py --algo discret
 * ``demonstrator``: the regret of the demonstrator itself (the goal env's own search with the time
   weight and beam width of ``scripts/demos.py``) on scenarios outside its training set, its plans
   replayed through ``env.step`` and scored against ``--reference-dir``.
-* ``consistency`` (README, round eleven): how often the demonstrator labels a state of its own plans
+* ``consistency`` (docs/learning-to-soar.md, round eleven): how often the demonstrator labels a state of its own plans
   as it would from there: from states along the plans (``--match``, default the base plans;
   ``--samples`` of them, ``--seed``) the same search plans again; the share that picks the plan's
   next primitive, and whether the other picks are cheaper or dearer. Where the clones agree with
@@ -26,7 +26,7 @@ Measurements for the successor policies of ``scripts/train_ppo.py --algo discret
 * ``ensemble``: the regret of the runs' policies side by side, the mean of their logits deciding
   (one run: the policy itself, as ``scripts/evaluate.py`` flies it); ``--lead N --plans DIR``: the
   first N steps flown by the demonstrator's plans (a ``demonstrator`` run's ``plans`` folder), the
-  policy taking over from there (README, round eleven: where in the flight the clones lose);
+  policy taking over from there (docs/learning-to-soar.md, round eleven: where in the flight the clones lose);
   ``--repeat-bonus B``: the primitive flown last gets B added to its logit (round twelve).
 * ``sampled`` (round thirteen): what lies within one run's reach: per scenario its mode's episode
   and ``--samples`` episodes drawn from its logits (``--temperature``,
@@ -350,7 +350,7 @@ def ensemble_report(
     """The ``ensemble`` measurement: one deterministic episode per scenario of ``on``; with ``lead``
     > 0 the first ``lead`` steps are those of the demonstrator's plan of the scenario (the plans of
     a ``demonstrator`` run, ``plans_dir``), the policy flying on from there; with ``repeat_bonus``
-    > 0 the primitive flown last gets that much added to its mean logit (README, round twelve:
+    > 0 the primitive flown last gets that much added to its mean logit (docs/learning-to-soar.md, round twelve:
     does keeping a manoeuvre help?)."""
     if not (isinstance(repeat_bonus, (int, float)) and 0.0 <= repeat_bonus < math.inf):
         raise ConfigError(f"--repeat-bonus={repeat_bonus!r} must be a finite number >= 0 (logit units)")

@@ -6,7 +6,8 @@ Examples::
     python scripts/evaluate.py --heldout 20 --seeds 0 1 2 --sst-budget 20 --out results/eval
     # a quick look (into results/eval-local, never the committed results)
     python scripts/evaluate.py --agents heuristic random --heldout 5
-    # a discrete successor run as it is and improved online by one-step lookahead (README, round twenty-one)
+    # a discrete successor run as it is and improved online by one-step lookahead
+    # (docs/learning-to-soar.md, round twenty-one)
     python scripts/evaluate.py --agents ppo-discrete ppo-discrete-rollout --ppo-model final \
         --ppo-dir ppo-discrete=results/ppo-score/a3-s0/discrete \
         --ppo-dir ppo-discrete-rollout=results/ppo-score/a3-s0/discrete

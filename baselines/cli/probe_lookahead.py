@@ -1,4 +1,4 @@
-"""Probe (README, round nine): can primitives be planned from the privileged observation alone?
+"""Probe (docs/learning-to-soar.md, round nine): can primitives be planned from the privileged observation alone?
 
 The cloned primitive policies fly straight on most held-out scenarios (median regret 1.00). This
 probe asks whether the observation holds what a primitive agent needs, without any learning in

@@ -93,7 +93,7 @@ def reference_config(
         grid = envelope_grid(base.model) if base.continuous else {}
         if grid:
             # measured on held-out scenarios at Ts = 10 s: without the progress term the beam keeps
-            # the straight glide and misses the climbs the 30 s yardstick finds (README, round six)
+            # the straight glide and misses the climbs the 30 s yardstick finds (docs/learning-to-soar.md, round six)
             cfg = dataclasses.replace(cfg, **grid, progress_weight=XC_PROGRESS_WEIGHT)
         return dataclasses.replace(cfg, max_edges=_episode_steps(base), time_weight=time_weight, min_height=min_height)
     steps = _episode_steps(base)
