@@ -357,7 +357,7 @@ class SuccessorFeatures:
     peak; ``zi`` of the task's scenarios), with the observed wind; the 174 primitives are flown from
     the aircraft (course 0 in that frame, the observed height and last airspeed) through the
     model's ``rollout``. Where the observed slots hold every thermal near the aircraft (random goal
-    scenarios: 1-5 thermals, 3 slots) the edge costs are those the env will charge (README, round
+    scenarios: 1-5 thermals, 3 slots) the edge costs are those the env will charge (docs/learning-to-soar.md, round
     nine: the probe's rebuilt field matched every flown edge). The features of a primitive are
     its successor's goal offset, height, wind and thermal offsets in the successor's own frame, the
     edge cost [kJ/kg], whether the edge reaches the goal region (``goal_radius``, fixed by the task

@@ -9,7 +9,7 @@ Measurements for the successor policies of ``scripts/train_ppo.py --algo discret
   rows whose successor is *near-equivalent* to the demonstrated one
   (:func:`baselines.scoring.near_equivalent`: end points within 50 m, heights within 10 m, edge
   costs within 20 J/kg -- e.g. a 360 against a 720 degree circle; before round twelve: the goal
-  distance instead of the end point, README) or *different* (everything
+  distance instead of the end point, docs/learning-to-soar.md) or *different* (everything
   else); separately for the rows a DAgger round labelled (a visited state: the first row of a
   ``-<tag>s<k>`` plan).
 * ``decisions`` (round nineteen): the run's pick at every state of lookahead plans (``--match``;

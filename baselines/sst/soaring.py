@@ -120,7 +120,7 @@ class SoaringSSTConfig:
         ~460-control grid flies width x 460 edges per depth, 40 depths): an 8-wide one gives the
         tree a beam's plan within the first seconds of a 20 s budget, where the 32-wide one took
         about half of it on the held-out scenarios; doubling on from 8 instead (16, 32) costs the
-        time that some scenarios need for the 32-wide beam (README: the ablation).
+        time that some scenarios need for the 32-wide beam (docs/sst.md, "The scout beam").
     :param seed_share: share of the planning budget (seconds or iterations) the seeding search may
         use [-].
     :param seed_progress_weight: the seeding search's ``progress_weight``
