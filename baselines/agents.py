@@ -313,41 +313,106 @@ class HeuristicAgent:
         return self._env
 
 
+#: Largest distance [m] between the fitted thermal centre and the lift-weighted centroid that the
+#: thermalling agent trusts: a fit beyond it (few samples, all on one side) falls back to the centroid.
+FIT_MAX_JUMP = 80.0
+
+
+def fit_gaussian_thermal(
+    north: np.ndarray, east: np.ndarray, lift: np.ndarray, start: tuple[float, float], radius: float
+) -> tuple[float, float, float, float] | None:
+    """Least-squares fit of a Gaussian thermal ``w = W exp(-d^2 / R^2)`` (d: distance from its centre)
+    to lift samples (Levenberg-Marquardt, at most 100 iterations, from ``start`` and ``radius``).
+
+    :param north, east: sample positions [m]; :param lift: updraft there [m/s].
+    :param start: first guess of the centre (north, east) [m]; :param radius: first guess of R [m].
+    :returns: (W [m/s], centre north [m], centre east [m], R [m], R kept in [15, 300]), or None when
+        the fit does not give a finite centre with W > 0.
+
+    Samples on one circle fix only the lift's amplitude on it, its direction and ``D / R^2`` (D: the
+    centre's distance from the circle's), not D itself; an orbit that walks (and the edge that
+    entered it) samples enough more to recover the thermal (tested).
+    """
+    x, y, w = (np.asarray(a, dtype=np.float64) for a in (north, east, lift))
+    p = np.array([max(float(w.max()), 0.1), float(start[0]), float(start[1]), float(radius)])
+
+    def residual(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        e = np.exp(-((x - q[1]) ** 2 + (y - q[2]) ** 2) / q[3] ** 2)
+        return q[0] * e - w, e
+
+    r, e = residual(p)
+    cost, lam = float(r @ r), 1e-2
+    for _ in range(100):
+        if lam > 1e8 or cost < 1e-20:  # no step helps any more, or an exact fit
+            break
+        dx, dy = x - p[1], y - p[2]
+        g = 2.0 * p[0] * e / p[3] ** 2
+        jac = np.stack([e, g * dx, g * dy, g * (dx * dx + dy * dy) / p[3]], axis=1)
+        a = jac.T @ jac
+        try:
+            step = np.linalg.solve(a + lam * np.diag(np.diag(a) + 1e-9), -(jac.T @ r))
+        except np.linalg.LinAlgError:
+            break
+        q = p + step
+        q[3] = min(max(q[3], 15.0), 300.0)
+        rq, eq = residual(q)
+        cq = float(rq @ rq)
+        if cq < cost:  # accept, trust the linear model more
+            p, r, e, cost, lam = q, rq, eq, cq, lam * 0.3
+        else:
+            lam *= 10.0
+    if not (p[0] > 0.0 and math.isfinite(p[1]) and math.isfinite(p[2])):
+        return None
+    return float(p[0]), float(p[1]), float(p[2]), float(p[3])
+
+
 class ThermallingAgent(HeuristicAgent):
-    """A thermalling autopilot on sensed lift alone: a variometer log along its own path, a centroid
-    estimate of the thermal's centre, an orbit about the estimate.
+    """A thermalling autopilot on sensed lift alone: a variometer log along its own path, a thermal
+    model fitted to it, and an orbit that keeps its circle on the fitted centre.
 
     It knows nothing of the thermal field but what it measured where it flew: at every decision it
     logs the updraft at each of the last edge's N event points, at the time it passed them (what a
-    netto variometer with GPS records), plus its own position, course and height. It never reads
-    the field elsewhere, nor the observation's thermal slots. Each decision:
+    netto variometer with GPS records), plus its own position, course, height and the wind (as an
+    autopilot estimates it). It never reads the field elsewhere, nor the observation's thermal slots.
+    Each decision:
 
     1. **Enter** -- cruising (:meth:`HeuristicAgent.cruise`: towards the goal, or the search glide),
        when the lift logged along the last edge peaked at ``enter_lift`` or more and a climb is useful
-       (:meth:`HeuristicAgent.climb_useful`), and not within ``tabu_radius`` of a thermal it left
-       less than ``tabu_time`` ago: start circling, towards the side where the last edge's lift grew.
-    2. **Centre** -- the thermal's centre is estimated as the lift-weighted centroid of the points
-       logged in the last ``centre_window`` seconds (the thermal drifts with the wind), weights
-       ``max(w - exit_lift, 0)`` (the centroid estimator of Allen & Lin 2007, "Guidance and
-       control of an autonomous soaring UAV", AIAA 2007-867).
-    3. **Orbit** -- fly towards the point of the circle of ``radius`` about the estimate that lies
-       one step ahead, along the arc tangent to the course through it (total turn: whole circles
-       for long steps, plus twice the bearing error), slow, at the zero-thrust glide angle of that
-       turn (no motor energy in lift).
-    4. **Leave** -- when the mean lift over the last ``exit_window`` seconds is below
-       ``exit_lift``, or a climb stops being useful; the estimate is remembered as tabu.
+       (:meth:`climb_useful`), and not within ``tabu_radius`` of a thermal it left less than
+       ``tabu_time`` ago: start circling, towards the side where the last edge's lift grew.
+    2. **Centre** -- a Gaussian thermal ``W exp(-d^2 / R^2)`` is fitted to the points logged in the last
+       ``centre_window`` seconds (:func:`fit_gaussian_thermal`; the thermal model of ArduSoar, Tabor,
+       Guilliard & Kassab, IROS 2018, fitted by least squares over a window instead of their EKF),
+       started from the last estimate or the lift-weighted centroid of the window (Allen & Lin 2007,
+       "Guidance and control of an autonomous soaring UAV", AIAA 2007-867; weights: lift above the
+       window's least). The fit can place the centre outside the flown circle, which the centroid
+       cannot; where it strays more than :data:`FIT_MAX_JUMP` from the centroid, the centroid is used.
+    3. **Orbit** -- circle at the tightest turn the envelope allows within ``radius`` (the slowest
+       airspeed whose circle fits, else the tightest circle), at the zero-thrust glide angle of that
+       turn. Each step's turn rate is chosen (21 rates from straight to the circling rate, the same
+       way round) so that the circle flown after the step, wind drift included, is centred nearest
+       the estimate: the circle walks onto the core instead of the estimate following the aircraft.
+    4. **Leave** -- after at least ``min_circle`` seconds of circling, when the mean lift over the last
+       ``exit_window`` seconds is below ``exit_lift``; or when a climb stops being useful. The estimate
+       is remembered as tabu.
 
     Without a goal (the thermal climb) it searches along an Archimedean spiral about the start,
     ``search_spacing`` metres between turns (out to ``search_radius``, then inwards again), at the
-    flattest zero-thrust glide (level below 120 m) -- an area search instead of one line.
+    flattest zero-thrust glide (level below 120 m), steering by pure pursuit at a point two steps
+    ahead on the spiral (aiming one step ahead made it zigzag).
 
     On the discrete env the nearest allowed primitive is flown (as :class:`HeuristicAgent`).
 
-    :param enter_lift: updraft [m/s] at the aircraft that starts circling.
+    The defaults were chosen on validation climb scenarios ``climb-5000 ... climb-5199`` with
+    ``soaring/ThermalClimbContinuous-v0`` (docs/learning-to-soar.md, "A thermalling controller that
+    climbs"); :attr:`RULE` names this version of the rule in results.
+
+    :param enter_lift: updraft [m/s] along the last edge that starts circling.
     :param exit_lift: mean updraft [m/s] over ``exit_window`` below which it leaves.
     :param exit_window: seconds of log that decide leaving (at least one step is used).
-    :param centre_window: seconds of log that the centre estimate uses (at least one step).
-    :param radius: orbit radius [m] (at least the tightest turn the envelope allows at that airspeed).
+    :param centre_window: seconds of log the thermal fit uses (at least one step).
+    :param radius: largest orbit radius [m] wanted (at least the tightest turn the envelope allows).
+    :param min_circle: seconds of circling before the lift may decide to leave.
     :param tabu_radius: distance [m] to a left thermal within which it does not enter again.
     :param tabu_time: how long [s] a left thermal stays tabu.
     :param search_spacing: distance [m] between the search spiral's turns.
@@ -355,15 +420,19 @@ class ThermallingAgent(HeuristicAgent):
     :param name: label in results.
     """
 
+    #: The rule's version, recorded with every result it flies (a changed rule flies again).
+    RULE = "sensed-v2"
+
     def __init__(
         self,
         *,
         search_spacing: float = 150.0,
-        enter_lift: float = 0.5,
+        enter_lift: float = 0.2,
         exit_lift: float = 0.2,
         exit_window: float = 30.0,
-        centre_window: float = 60.0,
-        radius: float = 45.0,
+        centre_window: float = 40.0,
+        radius: float = 25.0,
+        min_circle: float = 30.0,
         tabu_radius: float = 250.0,
         tabu_time: float = 300.0,
         ceiling: float = 0.75,
@@ -376,6 +445,7 @@ class ThermallingAgent(HeuristicAgent):
         self.exit_window = check_positive("exit_window", exit_window)
         self.centre_window = check_positive("centre_window", centre_window)
         self.radius = check_positive("radius", radius)
+        self.min_circle = check_range("min_circle", min_circle, 0.0, 1e6)
         self.tabu_radius = check_range("tabu_radius", tabu_radius, 0.0, 1e6)
         self.tabu_time = check_range("tabu_time", tabu_time, 0.0, 1e7)
         self.search_spacing = check_range("search_spacing", search_spacing, 1.0, 1e5)
@@ -385,6 +455,8 @@ class ThermallingAgent(HeuristicAgent):
         self._log: list[tuple[float, float, float, float]] = []  # (north, east, time, lift) since entering
         self._circling = False
         self._side = 1.0
+        self._entered = 0.0  # when it started circling [s]
+        self._estimate: tuple[float, float] | None = None  # the last fitted centre (north, east) [m]
         self._tabu: list[tuple[float, float, float]] = []  # (north, east, time left)
         self._logged_steps = -1
         self._phi = 0.0  # the search spiral's angle [rad] (r = spacing phi / 2 pi)
@@ -413,34 +485,64 @@ class ThermallingAgent(HeuristicAgent):
         return [(float(p[0]), float(p[1]), float(t), float(w)) for p, t, w in zip(pts, times, lift, strict=True)]
 
     def centre(self) -> tuple[float, float] | None:
-        """The lift-weighted centroid (north, east) [m] of the recent log, or None."""
+        """The thermal centre (north, east) [m] fitted to the recent log (see the class docstring), or None."""
         if not self._log:
             return None
         log = np.asarray(self._log, dtype=np.float64)
         log = log[log[:, 2] >= log[-1, 2] - max(self.centre_window, self._step_duration())]
-        w = np.maximum(log[:, 3] - self.exit_lift, 0.0)
-        if w.sum() <= 0.0:
-            return None
-        return float(w @ log[:, 0] / w.sum()), float(w @ log[:, 1] / w.sum())
+        w = log[:, 3] - log[:, 3].min()
+        if w.sum() <= 0.0:  # no lift gradient in the window: keep what was known
+            return self._estimate
+        centroid = float(w @ log[:, 0] / w.sum()), float(w @ log[:, 1] / w.sum())
+        fit = fit_gaussian_thermal(log[:, 0], log[:, 1], log[:, 3], self._estimate or centroid, 60.0)
+        if fit is None or math.hypot(fit[1] - centroid[0], fit[2] - centroid[1]) > FIT_MAX_JUMP:
+            self._estimate = centroid
+        else:
+            self._estimate = fit[1], fit[2]
+        return self._estimate
+
+    def climb_useful(self) -> bool:
+        """:meth:`HeuristicAgent.climb_useful`, and with a goal and a time limit: enough time left to
+        fly to the goal at the slowest airspeed (the cruise's near the goal) in the wind, with half as
+        much again to spare (a climb that ends the episode short of the goal is worth nothing)."""
+        if not super().climb_useful():
+            return False
+        base: Any = self._require_env().unwrapped
+        goal, limit = base.scenario.goal, getattr(base, "episode_steps", None)
+        if goal is None or limit is None:
+            return True
+        pn, pe = (float(v) for v in np.asarray(base.state, dtype=np.float64)[:2])
+        ts = self._step_duration()
+        dn, de = goal.north - pn, goal.east - pe
+        dist = math.hypot(dn, de)
+        field = base.scenario.field
+        # closing speed: the cruise's airspeed near the goal (the slowest) plus the wind along the way
+        along = (field.wind_north * dn + field.wind_east * de) / max(dist, 1e-9)
+        closing = max(float(base.model.library.table[:, COL_AIRSPEED].min()) + along, 1.0)
+        need = 1.5 * max(dist - goal.radius, 0.0) / closing + 2.0 * ts
+        return (limit - int(base.steps)) * ts >= need
 
     def intent(self) -> tuple[float, float, float]:
         base: Any = self._require_env().unwrapped
         model = base.model
-        pn, pe, chi, h = (float(v) for v in np.asarray(base.state, dtype=np.float64)[:4])
+        pn, pe, chi = (float(v) for v in np.asarray(base.state, dtype=np.float64)[:3])
         t = float(base.time)
         edge = self._last_edge()
         self._tabu = [(n, e, until) for n, e, until in self._tabu if until > t]
         if self._circling:
             self._log.extend(edge)
             recent = [w for (_, _, tw, w) in self._log if tw >= t - max(self.exit_window, self._step_duration())]
-            if not self.climb_useful() or (recent and float(np.mean(recent)) < self.exit_lift):
+            weak = t - self._entered >= self.min_circle and recent and float(np.mean(recent)) < self.exit_lift
+            if not self.climb_useful() or weak:
                 c = self.centre() or (pn, pe)
                 self._tabu.append((c[0], c[1], t + self.tabu_time))
                 self._circling = False
                 self._log = []
+                self._estimate = None
         elif edge and max(w for *_, w in edge) >= self.enter_lift and self.climb_useful():
             if all(math.hypot(pn - n, pe - e) > self.tabu_radius for n, e, _ in self._tabu):
                 self._circling = True
+                self._entered = t
                 self._log = list(edge)
                 # turn towards where the lift grew along the last edge: its side of the course
                 k = int(np.argmax([w for *_, w in edge]))
@@ -449,7 +551,7 @@ class ThermallingAgent(HeuristicAgent):
                 self._side = 1.0 if cross >= 0.0 else -1.0
         if not self._circling:
             return self.cruise()
-        return self._orbit(model, pn, pe, chi, h)
+        return self._orbit(model, pn, pe, chi)
 
     def cruise(self) -> tuple[float, float, float]:
         """Towards the goal as :class:`HeuristicAgent`; without one, along the search spiral."""
@@ -460,7 +562,7 @@ class ThermallingAgent(HeuristicAgent):
         model = base.model
         pn, pe, chi, h = (float(v) for v in np.asarray(base.state, dtype=np.float64)[:4])
         v, glide = flattest_glide(model)
-        ahead = v * self._step_duration()
+        ahead = 2.0 * v * self._step_duration()
         # the spiral's radius grows out to search_radius, then shrinks again (a triangle wave in phi)
         period = 2.0 * math.pi * self.search_radius / self.search_spacing
 
@@ -469,16 +571,18 @@ class ThermallingAgent(HeuristicAgent):
             r = self.search_spacing * min(m, 2.0 * period - m) / (2.0 * math.pi)
             return sc.start[0] + r * math.cos(phi + sc.start[2]), sc.start[1] + r * math.sin(phi + sc.start[2])
 
-        for _ in range(10_000):  # advance the target until it lies one step ahead
+        for _ in range(10_000):  # advance the target until it lies two steps ahead
             tn, te = point(self._phi)
             if math.hypot(tn - pn, te - pe) >= ahead:
                 break
             self._phi += 0.02
-        turn = max(-math.pi, min(math.pi, 2.0 * _wrap(math.atan2(te - pe, tn - pn) - chi)))
+        # pure pursuit: the arc tangent to the course through the target turns by twice the bearing
+        # error over its two steps, so one step turns by the bearing error
+        turn = max(-math.pi, min(math.pi, _wrap(math.atan2(te - pe, tn - pn) - chi)))
         return v, turn, (0.0 if h < 120.0 else glide)
 
-    def _orbit(self, model: Any, pn: float, pe: float, chi: float, h: float) -> tuple[float, float, float]:
-        """(airspeed, total turn, path angle) that follows the circle about the centre estimate."""
+    def _orbit(self, model: Any, pn: float, pe: float, chi: float) -> tuple[float, float, float]:
+        """(airspeed, total turn, path angle) of the next step in the thermal (class docstring, 3)."""
         ts = self._step_duration()
         top = float(model.scenario.bounds.height_max)
         lo = max(float(model.control_low[0]), float(model.library.table[:, COL_AIRSPEED].min())) + 0.5
@@ -493,19 +597,24 @@ class ThermallingAgent(HeuristicAgent):
         fits = np.flatnonzero(r_min <= self.radius)
         i = int(fits[0]) if fits.size else int(np.argmin(r_min))  # the slowest that fits, else the tightest
         v = float(speeds[i])
-        r = max(self.radius, float(r_min[i]))
-        c = self.centre() or (pn - self._side * r * math.sin(chi), pe + self._side * r * math.cos(chi))
-        theta = math.atan2(pe - c[1], pn - c[0])  # the aircraft's angle about the centre
-        step_angle = v * ts / r
-        ahead = theta + self._side * (step_angle % (2.0 * math.pi))
-        tn, te = c[0] + r * math.cos(ahead), c[1] + r * math.sin(ahead)
-        arc = 2.0 * _wrap(math.atan2(te - pe, tn - pn) - chi)  # the tangent arc through the target
-        if arc * self._side < 0.0:  # it turns against the circling direction: go round that arc's circle
-            arc += self._side * 2.0 * math.pi
-        turn = self._side * 2.0 * math.pi * math.floor(step_angle / (2.0 * math.pi)) + arc
-        chi_dot = turn / ts
-        gamma = float(model.aircraft.glide_angle(v, chi_dot, top))
-        return v, turn, gamma
+        r = max(self.radius, float(r_min[i])) * 1.001  # a hair wider: the rate stays inside the envelope
+        rate = self._side * v / r  # the circling turn rate [rad/s]
+        c = self.centre()
+        if c is not None:
+            wn, we = float(model.scenario.field.wind_north), float(model.scenario.field.wind_east)
+            om = np.linspace(0.0, rate, 21)
+            straight = np.abs(om) < 1e-9
+            safe = np.where(straight, 1.0, om)
+            # where one step at each rate leaves the aircraft (an arc of constant rate, plus the drift)
+            dn = np.where(straight, v * ts * math.cos(chi), v / safe * (np.sin(chi + om * ts) - math.sin(chi)))
+            de = np.where(straight, v * ts * math.sin(chi), -v / safe * (np.cos(chi + om * ts) - math.cos(chi)))
+            course = chi + om * ts
+            # the centre of the circle flown from there (right turn: the centre lies to the right)
+            cn = pn + dn + wn * ts - self._side * r * np.sin(course)
+            ce = pe + de + we * ts + self._side * r * np.cos(course)
+            rate = float(om[int(np.argmin(np.hypot(cn - c[0], ce - c[1])))])
+        gamma = float(model.aircraft.glide_angle(v, rate, top))
+        return v, rate * ts, gamma
 
 
 class ReplayAgent:
