@@ -377,7 +377,8 @@ class ThermallingAgent(HeuristicAgent):
     Each decision:
 
     1. **Enter** -- cruising (:meth:`HeuristicAgent.cruise`: towards the goal, or the search glide),
-       when the lift logged along the last edge peaked at ``enter_lift`` or more and a climb is useful
+       when the lift logged along the last edge, averaged over ``entry_samples`` consecutive samples
+       (a noisy variometer's single peaks are no thermal), peaked at ``enter_lift`` or more and a climb is useful
        (:meth:`climb_useful`), and not within ``tabu_radius`` of a thermal it left less than
        ``tabu_time`` ago: start circling, towards the side where the last edge's lift grew.
     2. **Centre** -- a Gaussian thermal ``W exp(-d^2 / R^2)`` is fitted to the points logged in the last
@@ -405,7 +406,8 @@ class ThermallingAgent(HeuristicAgent):
 
     The defaults were chosen on validation climb scenarios ``climb-5000 ... climb-5199`` with
     ``soaring/ThermalClimbContinuous-v0`` (docs/learning-to-soar.md, "A thermalling controller that
-    climbs"); :attr:`RULE` names this version of the rule in results.
+    climbs"); :attr:`RULE` names this version of the rule, and :meth:`settings` (the rule and every
+    setting) keys its results records.
 
     :param enter_lift: updraft [m/s] along the last edge that starts circling.
     :param exit_lift: mean updraft [m/s] over ``exit_window`` below which it leaves.
@@ -413,6 +415,11 @@ class ThermallingAgent(HeuristicAgent):
     :param centre_window: seconds of log the thermal fit uses (at least one step).
     :param radius: largest orbit radius [m] wanted (at least the tightest turn the envelope allows).
     :param min_circle: seconds of circling before the lift may decide to leave.
+    :param entry_samples: consecutive lift samples averaged for the entry test (1: the single peak).
+    :param sensor_noise: standard deviation [m/s] of Gaussian noise added to every logged lift sample
+        (a variometer's), drawn from a generator seeded by ``reset``'s seed; 0 (default): exact. With
+        0.1 m/s the defaults still climb on validation scenarios; with 0.3 m/s they enter on noise, and
+        ``enter_lift=0.4, entry_samples=5`` is needed (docs/learning-to-soar.md).
     :param tabu_radius: distance [m] to a left thermal within which it does not enter again.
     :param tabu_time: how long [s] a left thermal stays tabu.
     :param search_spacing: distance [m] between the search spiral's turns.
@@ -433,6 +440,8 @@ class ThermallingAgent(HeuristicAgent):
         centre_window: float = 40.0,
         radius: float = 25.0,
         min_circle: float = 30.0,
+        entry_samples: int = 3,
+        sensor_noise: float = 0.0,
         tabu_radius: float = 250.0,
         tabu_time: float = 300.0,
         ceiling: float = 0.75,
@@ -446,10 +455,19 @@ class ThermallingAgent(HeuristicAgent):
         self.centre_window = check_positive("centre_window", centre_window)
         self.radius = check_positive("radius", radius)
         self.min_circle = check_range("min_circle", min_circle, 0.0, 1e6)
+        self.entry_samples = check_int("entry_samples", entry_samples, 1)
+        self.sensor_noise = check_range("sensor_noise", sensor_noise, 0.0, 10.0)
+        self._noise = np.random.default_rng(0)
         self.tabu_radius = check_range("tabu_radius", tabu_radius, 0.0, 1e6)
         self.tabu_time = check_range("tabu_time", tabu_time, 0.0, 1e7)
         self.search_spacing = check_range("search_spacing", search_spacing, 1.0, 1e5)
         self._reset_memory()
+
+    def settings(self) -> dict[str, Any]:
+        """The rule's version and every setting: what a results record keys this agent by."""
+        names = ("enter_lift", "exit_lift", "exit_window", "centre_window", "radius", "min_circle", "entry_samples")
+        more = ("sensor_noise", "tabu_radius", "tabu_time", "search_spacing", "ceiling", "search_radius")
+        return {"rule": self.RULE, **{n: getattr(self, n) for n in names + more}}
 
     def _reset_memory(self) -> None:
         self._log: list[tuple[float, float, float, float]] = []  # (north, east, time, lift) since entering
@@ -462,12 +480,20 @@ class ThermallingAgent(HeuristicAgent):
         self._phi = 0.0  # the search spiral's angle [rad] (r = spacing phi / 2 pi)
 
     def reset(self, env: gym.Env, seed: int | None = None) -> None:
-        """Remember ``env`` and forget the last episode's log (deterministic: ``seed`` is unused)."""
+        """Remember ``env`` and forget the last episode's log; ``seed`` seeds the sensor noise (None: 0)."""
         super().reset(env, seed)
         self._reset_memory()
+        self._noise = np.random.default_rng(0 if seed is None else seed)
+
+    def _smoothed(self, edge: list[tuple[float, float, float, float]]) -> np.ndarray:
+        """The edge's lift samples as a moving average over ``entry_samples`` of them (fewer on a short edge)."""
+        w = np.array([x[3] for x in edge], dtype=np.float64)
+        k = min(self.entry_samples, len(w))
+        return np.convolve(w, np.full(k, 1.0 / k), mode="valid")
 
     def _last_edge(self) -> list[tuple[float, float, float, float]]:
-        """(north, east, time, lift) at the last edge's flown points (none before the first step)."""
+        """(north, east, time, lift) at the last edge's flown points (none before the first step),
+        with ``sensor_noise`` added."""
         base: Any = self._require_env().unwrapped
         steps = int(getattr(base, "steps", 0))
         if steps == 0 or steps == self._logged_steps:
@@ -482,6 +508,8 @@ class ThermallingAgent(HeuristicAgent):
         times = t_end - dt * np.arange(len(pts) - 1, -1, -1, dtype=np.float64)
         lift = field.updraft(pts[:, 0], pts[:, 1], pts[:, 3], times)
         lift = np.atleast_1d(lift)
+        if self.sensor_noise > 0.0:
+            lift = lift + self.sensor_noise * self._noise.standard_normal(len(lift))
         return [(float(p[0]), float(p[1]), float(t), float(w)) for p, t, w in zip(pts, times, lift, strict=True)]
 
     def centre(self) -> tuple[float, float] | None:
@@ -539,13 +567,13 @@ class ThermallingAgent(HeuristicAgent):
                 self._circling = False
                 self._log = []
                 self._estimate = None
-        elif edge and max(w for *_, w in edge) >= self.enter_lift and self.climb_useful():
+        elif edge and self._smoothed(edge).max() >= self.enter_lift and self.climb_useful():
             if all(math.hypot(pn - n, pe - e) > self.tabu_radius for n, e, _ in self._tabu):
                 self._circling = True
                 self._entered = t
                 self._log = list(edge)
                 # turn towards where the lift grew along the last edge: its side of the course
-                k = int(np.argmax([w for *_, w in edge]))
+                k = int(np.argmax(self._smoothed(edge))) + (len(edge) - len(self._smoothed(edge))) // 2
                 dn, de = edge[k][0] - edge[0][0], edge[k][1] - edge[0][1]
                 cross = math.cos(chi) * de - math.sin(chi) * dn  # > 0: the strongest point lies right
                 self._side = 1.0 if cross >= 0.0 else -1.0

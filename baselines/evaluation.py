@@ -278,7 +278,7 @@ def agent_spec(name: str, config: EvalConfig) -> AgentSpec:
         return AgentSpec(name, DISCRETE_ID, lambda: RandomAgent(use_masks=True, name=name), {"use_masks": True})
     env_id = CONTINUOUS_ID if name.endswith("-continuous") else DISCRETE_ID
     if name.startswith("thermalling"):
-        return AgentSpec(name, env_id, lambda: ThermallingAgent(name=name), {"rule": ThermallingAgent.RULE})
+        return AgentSpec(name, env_id, lambda: ThermallingAgent(name=name), ThermallingAgent().settings())
     return AgentSpec(name, env_id, lambda: HeuristicAgent(name=name), {"rule": "v1"})
 
 

@@ -107,8 +107,8 @@ class TaskJob:
                 "record_version": RECORD_VERSION,
             }
             return json.loads(json.dumps(settings))  # as a results file holds it (tuples as lists)
-        if self.agent == "thermalling":  # the rule's version: a changed rule flies again
-            return {"record_version": RECORD_VERSION, "rule": ThermallingAgent.RULE}
+        if self.agent == "thermalling":  # the rule's version and settings: a changed rule flies again
+            return {"record_version": RECORD_VERSION, **ThermallingAgent().settings()}
         return {"record_version": RECORD_VERSION}
 
 

@@ -296,6 +296,52 @@ def test_thermalling_search_spiral_turns_one_way() -> None:
     assert len(signs) == 1
 
 
+def test_thermalling_sensor_noise_is_seeded_and_single_peaks_do_not_enter() -> None:
+    """``sensor_noise`` is drawn from the reset's seed (same seed, same episode; another seed, another);
+    without it the log is the field's exact lift; the entry test averages ``entry_samples`` samples, so
+    one noisy peak of 0.5 m/s among zeros does not start a circle, where the single-sample test would."""
+    env, _ = _climb_on_a_thermal(offset=2500.0)  # nothing within reach: only noise
+    base: Any = env.unwrapped
+
+    def fly(agent: ThermallingAgent, seed: int) -> list[Any]:
+        env.reset(seed=0)
+        agent.reset(env, seed)
+        acts = []
+        for _ in range(15):
+            action, _ = agent.predict(None)
+            env.step(action)
+            acts.append(np.asarray(action).tolist())
+        return acts
+
+    noisy = ThermallingAgent(sensor_noise=0.3)
+    assert fly(noisy, 7) == fly(noisy, 7)
+    assert fly(noisy, 7) != fly(noisy, 8)
+    env2, sc2 = _climb_on_a_thermal(offset=40.0)  # in lift: the samples are the field's, or not
+    for agent in (ThermallingAgent(), ThermallingAgent(sensor_noise=0.3)):
+        env2.reset(seed=0)
+        agent.reset(env2, 0)
+        env2.step(agent.predict(None)[0])
+        edge = np.asarray(agent._last_edge())
+        exact = sc2.field.updraft(edge[:, 0], edge[:, 1], np.asarray(env2.unwrapped.path)[-10:, 3], edge[:, 2])
+        assert np.array_equal(edge[:, 3], exact) == (agent.sensor_noise == 0.0)
+    exact = ThermallingAgent()
+    spike = [(0.0, 10.0 * i, 0.0, 0.5 if i == 4 else 0.0) for i in range(10)]
+    assert exact._smoothed(spike).max() < exact.enter_lift
+    assert ThermallingAgent(entry_samples=1)._smoothed(spike).max() >= exact.enter_lift
+    assert base.steps == 15
+
+
+def test_thermalling_settings_key_the_records() -> None:
+    """The records key the agent by its rule and every setting: a changed default flies again."""
+    a, b = ThermallingAgent().settings(), ThermallingAgent(radius=30.0).settings()
+    assert a["rule"] == ThermallingAgent.RULE and a["radius"] == 25.0
+    assert a != b and json.loads(json.dumps(a)) == a
+    with pytest.raises(ConfigError, match="entry_samples"):
+        ThermallingAgent(entry_samples=0)
+    with pytest.raises(ConfigError, match="sensor_noise"):
+        ThermallingAgent(sensor_noise=-0.1)
+
+
 def test_thermalling_climb_needs_time_to_reach_the_goal() -> None:
     """With a goal and a time limit a climb is useful only while the goal can still be reached at the
     slowest airspeed, in the wind, with half as much time again to spare."""
