@@ -328,13 +328,23 @@ def fit_gaussian_thermal(
     :param start: first guess of the centre (north, east) [m]; :param radius: first guess of R [m].
     :returns: (W [m/s], centre north [m], centre east [m], R [m], R kept in [15, 300]), or None when
         the fit does not give a finite centre with W > 0.
+    :raises ConfigError: samples of unequal length or fewer than 3, a non-finite value, radius <= 0.
 
     Samples on one circle fix only the lift's amplitude on it, its direction and ``D / R^2`` (D: the
     centre's distance from the circle's), not D itself; an orbit that walks (and the edge that
     entered it) samples enough more to recover the thermal (tested).
     """
-    x, y, w = (np.asarray(a, dtype=np.float64) for a in (north, east, lift))
-    p = np.array([max(float(w.max()), 0.1), float(start[0]), float(start[1]), float(radius)])
+    try:
+        x, y, w = (np.asarray(a, dtype=np.float64).ravel() for a in (north, east, lift))
+        p = np.array([0.0, float(start[0]), float(start[1]), float(radius)])
+    except (TypeError, ValueError, IndexError) as err:
+        raise ConfigError(f"fit_gaussian_thermal: samples and start must be numbers ({err})") from None
+    if not (len(x) == len(y) == len(w) >= 3):
+        raise ConfigError(f"north, east, lift must hold as many samples, at least 3; got {len(x)}, {len(y)}, {len(w)}")
+    if not (np.isfinite(x).all() and np.isfinite(y).all() and np.isfinite(w).all() and np.isfinite(p).all()):
+        raise ConfigError("north, east, lift and start must be finite")
+    check_positive("radius", radius)
+    p[0] = max(float(w.max()), 0.1)
 
     def residual(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         e = np.exp(-((x - q[1]) ** 2 + (y - q[2]) ** 2) / q[3] ** 2)

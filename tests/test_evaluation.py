@@ -263,6 +263,22 @@ def test_gaussian_thermal_fit_recovers_the_thermal(w: float, r: float, cn: float
     assert fit[3] == pytest.approx(r, rel=1e-3)
 
 
+def test_gaussian_thermal_fit_refuses_bad_samples() -> None:
+    """Unequal or too few samples, NaN, strings and a radius <= 0: a ConfigError naming what is wrong."""
+    from baselines.agents import fit_gaussian_thermal
+
+    ok = np.zeros(5)
+    for args, match in (
+        ((ok, ok[:4], ok, (0.0, 0.0), 60.0), "as many samples"),
+        ((ok[:2], ok[:2], ok[:2], (0.0, 0.0), 60.0), "at least 3"),
+        ((ok, ok, np.full(5, np.nan), (0.0, 0.0), 60.0), "finite"),
+        ((ok, ok, ["a"] * 5, (0.0, 0.0), 60.0), "numbers"),
+        ((ok, ok, ok, (0.0, 0.0), 0.0), "radius"),
+    ):
+        with pytest.raises(ConfigError, match=match):
+            fit_gaussian_thermal(*args)
+
+
 def test_thermalling_agent_finds_and_works_the_core_in_wind() -> None:
     """Entering 60 m beside a thermal in a 3 m/s wind (the aircraft drifts 15 m a step, the thermal
     stays), it fits the centre to within 10 m, keeps circling and climbs 300 m in 300 s."""
