@@ -577,13 +577,13 @@ class ThermallingAgent(HeuristicAgent):
                 self._circling = False
                 self._log = []
                 self._estimate = None
-        elif edge and self._smoothed(edge).max() >= self.enter_lift and self.climb_useful():
+        elif edge and (smooth := self._smoothed(edge)).max() >= self.enter_lift and self.climb_useful():
             if all(math.hypot(pn - n, pe - e) > self.tabu_radius for n, e, _ in self._tabu):
                 self._circling = True
                 self._entered = t
                 self._log = list(edge)
                 # turn towards where the lift grew along the last edge: its side of the course
-                k = int(np.argmax(self._smoothed(edge))) + (len(edge) - len(self._smoothed(edge))) // 2
+                k = int(np.argmax(smooth)) + (len(edge) - len(smooth)) // 2  # the average's middle sample
                 dn, de = edge[k][0] - edge[0][0], edge[k][1] - edge[0][1]
                 cross = math.cos(chi) * de - math.sin(chi) * dn  # > 0: the strongest point lies right
                 self._side = 1.0 if cross >= 0.0 else -1.0
