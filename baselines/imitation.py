@@ -10,8 +10,9 @@ end, and random exploration around a straight-flying policy does not fly one. Th
 * :func:`demonstrations` replays every reference plan of a folder through the training env's
   policy interface (body-frame observations, the inverse of the turn curve), recording the
   policy's observation, the action that reproduces the plan's control, and the discounted
-  return-to-go of the training reward -- a replay that does not end in the goal is an error, since
-  the env then does not fly the dynamics the plans were searched in;
+  return-to-go of the training reward -- a replay that does not end in the goal (the thermal climb:
+  that does not fly to the time limit) is an error, since the env then does not fly the dynamics the
+  plans were searched in;
 * :func:`pretrain` fits the policy to the actions (negative log-likelihood of the policy's
   distribution: least squares on the Gaussian mean with a learnt spread, cross-entropy over the
   primitives) and the critic to the returns, by minibatch Adam.
@@ -182,9 +183,13 @@ def demonstrations(
                 times.append(float(info["time"]))
         finally:
             env.close()
-        if not (terminated and info.get("is_success")):
+        if getattr(env.unwrapped, "has_goal", True):
+            ok, what = terminated and bool(info.get("is_success")), "reach the goal"
+        else:  # the thermal climb: a plan flies to the time limit
+            ok, what = truncated and not terminated, "fly to the time limit"
+        if not ok:
             raise ConfigError(
-                f"demos: the {sampler} plan of {name!r} does not reach the goal when replayed in this env "
+                f"demos: the {sampler} plan of {name!r} does not {what} when replayed in this env "
                 "(other duration, envelope or stall limit than the reference search?)"
             )
         g = np.empty(len(rewards))
@@ -204,7 +209,7 @@ def demonstrations(
         used.append(name)
         costs.append(float(ref.best_cost))
     if not used:
-        raise ConfigError(f"demos={str(reference_dir)!r}: no {sampler} plan that reaches the goal")
+        raise ConfigError(f"demos={str(reference_dir)!r}: no {sampler} plan (with a finite cost)")
     if all(isinstance(a, (int, np.integer)) for a in act_rows):  # primitives, or control-grid rows
         actions = np.asarray(act_rows, np.int64)
     else:
@@ -511,6 +516,55 @@ def visited_prefixes(
         (dataclasses.replace(sc, name=f"{sc.name}-{tag}s{k}"), taken)
         for sc, k, _, taken in _visits(scenarios, make_env, act, every, until, failed_only)
     ]
+
+
+def controller_plan(
+    make_env: Callable[[Scenario], gym.Env],
+    agent: Any,
+    scenario: Scenario,
+    prefix: Sequence[Any] = (),
+) -> dict[str, Any]:
+    """A hand-written controller's episode as a plan: ``prefix`` flown first (a DAgger start: a
+    policy's actions), the controller shadowing it -- it sees every observation, so its memory
+    (a thermalling controller's variometer log, its search spiral) is that of this path -- then
+    the controller acting to the end. The demonstrator of the tasks a reference search cannot
+    teach, such as the thermal climb on sensed lift (the search knows where the thermals are).
+
+    :param make_env: the raw env of the task, starting in the given scenario at its first reset.
+    :param agent: ``reset(env, seed)`` and ``predict(obs) -> (env action, state)``, e.g.
+        :class:`baselines.agents.ThermallingAgent`.
+    :param prefix: env actions flown before the controller takes over.
+    :returns: ``actions`` (the prefix's, then the controller's, as lists), ``demo_from`` (the
+        prefix's length), ``energy_spent`` [J/kg], ``flight_time`` [s], ``terminated`` (ended by
+        a crash, the domain's edge or a stall: not a plan to imitate) and ``truncated``.
+    """
+    env = make_env(scenario)
+    try:
+        obs, _ = env.reset(seed=0)
+        agent.reset(env, 0)
+        actions: list[Any] = []
+        terminated = truncated = False
+        info: dict[str, Any] = {"energy_spent": 0.0, "time": 0.0}
+        for a in prefix:
+            agent.predict(obs)  # shadowing: the controller's memory follows the flown path
+            actions.append(np.asarray(a).tolist())
+            obs, _, terminated, truncated, info = env.step(a)
+            if terminated or truncated:
+                break
+        while not (terminated or truncated):
+            a, _ = agent.predict(obs)
+            actions.append(np.asarray(a).tolist())
+            obs, _, terminated, truncated, info = env.step(a)
+    finally:
+        env.close()
+    return {
+        "actions": actions,
+        "demo_from": len(prefix),
+        "energy_spent": float(info["energy_spent"]),
+        "flight_time": float(info["time"]),
+        "terminated": bool(terminated),
+        "truncated": bool(truncated),
+    }
 
 
 def sampled_episodes(

@@ -260,7 +260,11 @@ def test_sb3_adapter_takes_every_registered_id() -> None:
 def test_threads_give_the_same_steps_bit_for_bit(env_id: str) -> None:
     """num_threads splits each step's rows over worker threads: same transitions as one thread."""
     n = 3 * MIN_ROWS_PER_THREAD + 5  # uneven blocks, enough rows for three threads
-    kwargs = {"scenario": "random"} if env_id in IDS else {"history_length": 3, "sensor_noise": 0.2}
+    kwargs = (
+        {"scenario": "random"}
+        if env_id in IDS
+        else {"history_length": 3, "sensor_noise": 0.2, "history_positions": True}
+    )
     envs = [gym.make_vec(env_id, num_envs=n, num_threads=k, **kwargs) for k in (1, 2, 3)]
     assert [e.num_threads for e in envs] == [1, 2, 3]
     first = [e.reset(seed=3) for e in envs]

@@ -29,7 +29,14 @@ from baselines.ppo import (
     train,
     turn_curve,
 )
-from baselines.reference import ReferenceConfig, compute_reference, load_reference, load_references, save_reference
+from baselines.reference import (
+    ReferenceConfig,
+    ScenarioReference,
+    compute_reference,
+    load_reference,
+    load_references,
+    save_reference,
+)
 from baselines.reference.tasks import XC_DEMO_MIN_HEIGHT, XC_DEMO_TIME_WEIGHT
 from soaring_env._validation import ConfigError
 from soaring_env.env.config import MAX_EPISODE_STEPS
@@ -926,6 +933,79 @@ def test_demos_cli_plans_resumes_and_runs_a_dagger_round(
         with pytest.raises(SystemExit) as exc:
             main([*bad, *common])
         assert exc.value.code == 2 and field in capsys.readouterr().err
+
+
+def test_climb_demos_are_the_controllers_episodes_and_a_dagger_round_shadows_the_policy(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--task climb``: the thermalling controller's episodes are written as plans that replay
+    bit for bit, to the time limit, through the sensed tier with sample positions; a rerun skips
+    them; a clone of them flies a DAgger round whose plans keep the clone's steps as a prefix
+    (``demo_from``) and the controller's after it -- those of a controller that saw the prefix
+    fly; a plan that ends early is refused by the cloning."""
+    from baselines.agents import ThermallingAgent
+    from baselines.cli.demos import main
+    from baselines.imitation import controller_plan
+
+    climb = "soaring/ThermalClimbContinuous-v0"
+    sensed = {"observe_thermals": False, "history_length": 4, "history_positions": True, "observe_start": True}
+    out = tmp_path / "demos"
+    common = ["--task", "climb", "--env-kwargs", '{"time_limit": 60}', "--no-progress", "--out", str(out)]
+    assert main(["--scenarios", "2", *common]) == 0
+    files = sorted(out.glob("climb-*.json"))
+    assert [f.stem for f in files] == ["climb-20000", "climb-20001"]
+    plan = load_reference(files[0]).samplers["continuous"]
+    assert plan.settings["demonstrator"] == "thermalling" and plan.settings["rule"] == ThermallingAgent.RULE
+    assert plan.demo_from == 0 and len(plan.actions) == 12 and plan.flight_time == 60.0
+    env = gym.make(climb, time_limit=60, **sensed)  # another observation, the same flight
+    env.reset(seed=0, options={"scenario": get_scenario("climb-20000")})
+    for a in plan.actions:
+        *_, info = env.step(np.asarray(a, np.float32))
+    assert info["energy_spent"] == plan.best_cost
+    stamp = files[0].stat().st_mtime_ns
+    assert main(["--scenarios", "2", *common]) == 0 and files[0].stat().st_mtime_ns == stamp
+    assert "0 of 2" in capsys.readouterr().out
+    run = train(
+        TrainConfig(
+            algo="continuous",
+            task="climb",
+            total_timesteps=0,
+            demos=str(out),
+            demo_epochs=1,
+            demo_mirror=False,
+            env_kwargs={**sensed, "time_limit": 60},
+            n_eval_scenarios=2,
+            checkpoint_freq=0,
+            progress_bar=False,
+        ),
+        tmp_path / "run",
+    )
+    own_env = ["--task", "climb", "--no-progress", "--out", str(out)]  # the run's env: its config.json
+    assert main(["--scenarios", "1", "--dagger", str(run), "--every", "5", "--tag", "p1", *own_env]) == 0
+    starts = sorted(out.glob("climb-20000-p1s*.json"), key=lambda f: int(f.stem.rsplit("s", 1)[1]))
+    assert [f.stem for f in starts] == ["climb-20000-p1s5", "climb-20000-p1s10"]
+    dagger = load_reference(starts[0]).samplers["continuous"]
+    assert dagger.demo_from == 5 and len(dagger.actions) == 12 and dagger.settings["every"] == 5
+    shadow = controller_plan(
+        lambda sc: gym.make(climb, time_limit=60, **sensed, scenario=sc),
+        ThermallingAgent(),
+        get_scenario("climb-20000"),
+        dagger.actions[:5],
+    )
+    assert shadow["actions"] == dagger.actions and shadow["energy_spent"] == dagger.best_cost
+    demos = demonstrations(
+        out, lambda sc: make_eval_env(climb, [sc], {**sensed, "time_limit": 60}), sampler="continuous", gamma=0.99
+    )
+    assert len(demos) == 12 + 12 + 7 + 2  # two base plans, the DAgger plans from step 5 and 10 on
+    short = dataclasses.replace(dagger, actions=dagger.actions[:8])  # ends before the time limit
+    save_reference(ScenarioReference(get_scenario("climb-20000"), math.nan, {"continuous": short}), out / "short.json")
+    with pytest.raises(ConfigError, match="does not fly to the time limit"):
+        demonstrations(
+            out, lambda sc: make_eval_env(climb, [sc], {**sensed, "time_limit": 60}), sampler="continuous", gamma=0.99
+        )
+    with pytest.raises(SystemExit) as exc:
+        main(["--sampler", "primitive", *common])
+    assert exc.value.code == 2 and "--task climb" in capsys.readouterr().err
 
 
 def test_sampled_episodes_draw_from_the_tempered_softmax() -> None:

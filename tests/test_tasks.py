@@ -53,7 +53,13 @@ def test_gymnasium_and_sb3_check_env(env_id: str) -> None:
 def test_native_batched_equals_single_envs(env_id: str, noise: float) -> None:
     """Same seeds, same actions: the batched env's transitions equal n single envs' (sync)."""
     n = 3
-    kw = {"history_length": 2, "sensor_noise": noise, "observe_thermals": noise == 0.0}
+    kw = {
+        "history_length": 2,
+        "sensor_noise": noise,
+        "observe_thermals": noise == 0.0,
+        "history_positions": noise > 0,
+        "observe_start": noise > 0,
+    }
     sync = gym.make_vec(env_id, num_envs=n, vectorization_mode="sync", **kw)
     native = gym.make_vec(env_id, num_envs=n, **kw)
     o1, _ = sync.reset(seed=5)
@@ -85,6 +91,64 @@ def test_same_seed_same_episode(env_id: str) -> None:
         return out
 
     assert run() == run()
+
+
+def test_history_positions_of_a_straight_glide_in_closed_form() -> None:
+    """In a steady wind with a constant control the aircraft's ground velocity is constant, so
+    edge j back was sensed (its time midpoint) (j + 1/2) edges behind: -(j + 1/2) d, d the ground
+    displacement of one edge; in the aircraft's frame that is straight behind (ahead < 0, right 0
+    but for the wind's crab). Slots not flown yet read zero."""
+    from baselines.ppo import BodyFrame
+
+    h = 4
+    env = gym.make(
+        "soaring/ThermalClimbContinuous-v0", observe_thermals=False, history_length=h, history_positions=True
+    )
+    names = env.unwrapped.observation_names
+    north = [names.index(f"history_{j}_north") for j in range(h)]
+    east = [names.index(f"history_{j}_east") for j in range(h)]
+    obs, _ = env.reset(seed=0, options={"scenario": "climb-10001"})
+    assert not obs[north + east].any()
+    scale = env.unwrapped.config.position_scale
+    start = env.unwrapped.state[:2].copy()
+    for k in range(1, h + 2):
+        obs, *_ = env.step(np.array([0.0, 0.0, 0.0], dtype=np.float32))  # straight, mid-envelope speed
+        d = (env.unwrapped.state[:2] - start) / k  # one edge's ground displacement [m]
+        for j in range(h):
+            want = -(j + 0.5) * d / scale if j < k else np.zeros(2)
+            assert np.allclose([obs[north[j]], obs[east[j]]], want, atol=1e-6)
+    frame = BodyFrame(names)
+    body = frame(obs)
+    ahead = body[north]
+    assert np.all(ahead < 0) and np.all(np.diff(ahead) < 0)  # further behind, edge by edge
+
+
+def test_observe_start_gives_the_start_relative_to_the_aircraft() -> None:
+    env = gym.make(
+        "soaring/ThermalClimbContinuous-v0", observe_thermals=False, observe_start=True, position_scale=200.0
+    )
+    names = env.unwrapped.observation_names
+    i, k = names.index("start_north"), names.index("start_east")
+    obs, _ = env.reset(seed=2)
+    start = env.unwrapped.scenario.start_state[:2].copy()
+    assert obs[i] == 0.0 and obs[k] == 0.0
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        obs, _, term, trunc, _ = env.step(rng.uniform(-1, 1, 3).astype(np.float32))
+        if term or trunc:
+            break
+        want = (start - env.unwrapped.state[:2]) / 200.0
+        assert np.allclose(obs[[i, k]], np.clip(want, -10, 10), atol=1e-6)
+    with pytest.raises(ConfigError, match="observe_start"):
+        gym.make("soaring/ThermalClimb-v0", observe_start="no")
+
+
+def test_history_positions_need_the_history_and_extend_it() -> None:
+    env = gym.make("soaring/ThermalClimb-v0", observe_thermals=False, history_length=2, history_positions=True)
+    names = env.unwrapped.observation_names
+    assert names[-10:] == [f"history_{j}_{n}" for j in range(2) for n in ("lift", "climb", "turn", "north", "east")]
+    plain = gym.make("soaring/ThermalClimb-v0", observe_thermals=False, history_length=2)
+    assert len(plain.unwrapped.observation_names) == len(names) - 4
 
 
 def test_sensor_noise_is_gaussian_and_counter_based() -> None:
@@ -256,6 +320,8 @@ def test_task_scenarios_are_reproducible_and_named() -> None:
         ("soaring/ThermalClimb-v0", {"random_scenario": {"height": (0.0, 100.0)}}, "height"),
         ("soaring/CrossCountry-v0", {"random_scenario": {"corridor": -1.0}}, "corridor"),
         ("soaring/ThermalClimb-v0", {"history_length": -1}, "history_length"),
+        ("soaring/ThermalClimb-v0", {"history_positions": True}, "history_length > 0"),
+        ("soaring/ThermalClimb-v0", {"history_length": 2, "history_positions": "yes"}, "history_positions"),
         ("soaring/ThermalClimb-v0", {"sensor_noise": float("nan")}, "sensor_noise"),
         ("soaring/Soaring-v0", {"envelope": "fancy"}, "envelope"),
     ],

@@ -19,6 +19,11 @@ the states a trained policy visits.
     # ... or its mode improved by one-step lookahead over its 8 likeliest primitives (policy iteration)
     python scripts/demos.py --scenarios 200 --first 5000 --self-imitate results/ppo-score/m3-s0 --lookahead 8 \
         --margin 0 --tag p1 --out results/reference-train-prim-t1
+    # thermal climb on sensed lift: the thermalling controller's episodes on climb-20000 ... (no search),
+    # then a DAgger round: a run's policy flown, the controller shadowing it and taking over at every 6th step
+    python scripts/demos.py --task climb --scenarios 400 --out results/demos-climb
+    python scripts/demos.py --task climb --scenarios 200 --dagger results/ppo-climb-clone/c1/continuous --every 6 \
+        --tag p1 --out results/demos-climb
     # goal reaching at Ts = 10 s on the physical envelope: the goal env's own search in that env
     python scripts/demos.py --scenarios 600 --out results/reference-train-ts10 \
         --env-kwargs '{"duration": 10, "envelope": "physical", "n_points": 10, "max_steps": 120, "time_limit": 1200}'
@@ -37,6 +42,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import time
 from pathlib import Path
@@ -45,7 +51,7 @@ from typing import Any
 from baselines._runs import add_backend_args, check_cli_args, cli_workers, read_json
 from baselines.evaluation import PPO_MODELS
 from baselines.imitation import DEMO_SEED0, demo_reference_config, visited_starts
-from baselines.reference import ReferenceConfig
+from baselines.reference import ReferenceConfig, SamplerReference
 from baselines.reference.runner import reference_table, run_references
 from baselines.reference.tasks import XC_DEMO_MIN_HEIGHT, XC_DEMO_TIME_WEIGHT, reference_config
 from soaring_env._validation import ConfigError
@@ -59,13 +65,20 @@ from soaring_env.scenario import atomic_write_text, get_scenario
 DEMO_TASKS: dict[str, tuple[str, str, float, float]] = {
     "goal": ("soaring/SoaringContinuous-v0", "random", 0.0, 0.0),
     "xc": ("soaring/CrossCountryContinuous-v0", "xc", XC_DEMO_TIME_WEIGHT, XC_DEMO_MIN_HEIGHT),
+    # no search: the sensed-lift thermalling controller demonstrates (_controller_demos)
+    "climb": ("soaring/ThermalClimbContinuous-v0", "climb", 0.0, 0.0),
 }
 
 
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point; returns the exit status."""
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--task", choices=DEMO_TASKS, default="goal", help="goal reaching (default) or cross-country")
+    p.add_argument(
+        "--task",
+        choices=DEMO_TASKS,
+        default="goal",
+        help="goal reaching (default), cross-country, or the thermal climb (the thermalling controller demonstrates)",
+    )
     p.add_argument("--scenarios", type=int, default=200, help=f"training scenarios <family>-{DEMO_SEED0} ... (200)")
     p.add_argument("--first", type=int, default=0, help="skip this many training scenarios (default 0)")
     p.add_argument("--sampler", choices=["continuous", "primitive"], default="continuous", help="action set")
@@ -140,6 +153,14 @@ def main(argv: list[str] | None = None) -> int:
     if not args.tag.isalnum() and args.tag != "":
         p.error(f"--tag={args.tag!r}: letters and digits only")
     env_kwargs = _env_kwargs(p, args.env_kwargs)
+    if args.task == "climb":
+        if args.self_imitate is not None or args.sampler != "continuous" or args.failed_only:
+            p.error("--task climb: the controller's continuous episodes (no --self-imitate, --sampler primitive "
+                    "or --failed-only)")  # fmt: skip
+        try:
+            return _controller_demos(args, env_kwargs)
+        except (ConfigError, FileNotFoundError, ValueError) as exc:
+            p.error(str(exc))
     if args.self_imitate is not None:
         if args.dagger is not None or args.task != "goal" or env_kwargs:
             p.error("--self-imitate goes with goal reaching alone (no --dagger, --task xc or --env-kwargs)")
@@ -270,6 +291,83 @@ def _dagger_starts(args: argparse.Namespace, scenarios: list, task: bool) -> tup
     return starts, prefixes
 
 
+def _flown_plan(episode: dict[str, Any], settings: dict[str, Any], seconds: float, **extra: Any) -> SamplerReference:
+    """A flown (not searched) episode -- its ``actions``, ``energy_spent`` [J/kg] and
+    ``flight_time`` [s] -- as a reference-format plan (no direct plan, no rollouts)."""
+    return SamplerReference(
+        best_cost=episode["energy_spent"],
+        direct_cost=math.nan,
+        actions=episode["actions"],
+        direct_actions=[],
+        flight_time=episode["flight_time"],
+        settings=settings,
+        rollouts=0,
+        seconds=round(seconds, 3),
+        **extra,
+    )
+
+
+def _controller_demos(args: argparse.Namespace, env_kwargs: dict[str, Any] | None) -> int:
+    """``--task climb``: the thermalling controller (:class:`baselines.agents.ThermallingAgent`,
+    sensed lift only) flies each scenario, or with ``--dagger`` each state the run visits after
+    shadowing the run's steps there (:func:`baselines.imitation.controller_plan`); each episode
+    that flies to the time limit becomes a plan file in the reference format (one per scenario,
+    atomically; a rerun skips files with the same settings). Episodes the controller ends on the
+    ground or outside the domain are counted, not written."""
+    from baselines._runs import progress_bar
+    from baselines.agents import ThermallingAgent
+    from baselines.evaluation import make_env
+    from baselines.imitation import controller_plan
+    from baselines.reference import ScenarioReference, save_reference
+    from baselines.reference.yardstick import load_reference
+
+    task_id, family, _, _ = DEMO_TASKS["climb"]
+    scenarios = [get_scenario(f"{family}-{DEMO_SEED0 + args.first + k}") for k in range(args.scenarios)]
+    prefixes: dict[str, list] = {}
+    if args.dagger is not None:
+        env_kwargs = _run_env_kwargs(args.dagger, args.ppo_model, env_kwargs)
+        scenarios, prefixes = _dagger_starts(args, scenarios, task=True)
+    kwargs = dict(env_kwargs or {})
+    settings: dict[str, Any] = {"demonstrator": "thermalling", **ThermallingAgent().settings()}
+    if args.dagger is not None:
+        settings |= {"dagger": str(args.dagger), "ppo_model": args.ppo_model, "every": args.every}
+    if kwargs:
+        settings["env_kwargs"] = kwargs
+    args.out.mkdir(parents=True, exist_ok=True)
+
+    def done(name: str) -> bool:
+        path = args.out / f"{name}.json"
+        if not path.is_file():
+            return False
+        plan = load_reference(path).samplers.get("continuous")
+        return plan is not None and plan.settings == settings
+
+    todo = [sc for sc in scenarios if not done(sc.name)]
+    print(f"demonstrations: {len(todo)} of {len(scenarios)} thermalling-controller episodes to fly -> {args.out}",
+          flush=True)  # fmt: skip
+    bar = progress_bar(len(todo), 0, not args.no_progress, "controller", "episode")
+    t0 = time.perf_counter()
+    written = ended = 0
+    for sc in todo:
+        t1 = time.perf_counter()
+        plan = controller_plan(
+            lambda s: make_env(task_id, {**kwargs, "scenario": s}), ThermallingAgent(), sc, prefixes.get(sc.name, ())
+        )
+        if plan["terminated"]:
+            ended += 1
+        else:
+            ref = _flown_plan(plan, settings, time.perf_counter() - t1, demo_from=plan["demo_from"])
+            save_reference(ScenarioReference(sc, math.nan, {"continuous": ref}), args.out / f"{sc.name}.json")
+            written += 1
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
+    print(f"{written} plans written, {ended} episodes ended early (not written), in {time.perf_counter() - t0:.0f} s "
+          f"-> {args.out}", flush=True)  # fmt: skip
+    return 0
+
+
 def _self_imitation(args: argparse.Namespace) -> int:
     """``--self-imitate``: per scenario the run's greedy episode and ``--samples`` sampled ones
     (:func:`baselines.imitation.sampled_episodes`, seeded by the scenario's seed); the best
@@ -280,13 +378,12 @@ def _self_imitation(args: argparse.Namespace) -> int:
     ``self-imitation/<tag>-<first seed>+<count>.json`` in ``--out`` (atomically, after each
     scenario), which the same command resumes from."""
     import dataclasses
-    import math
 
     from baselines._runs import progress_bar
     from baselines.agents import PPOAgent
     from baselines.evaluation import make_env, ppo_env_kwargs, ppo_model_path
     from baselines.imitation import best_reached, rollout_improved, sampled_episodes
-    from baselines.reference import SamplerReference, ScenarioReference, save_reference
+    from baselines.reference import ScenarioReference, save_reference
 
     agent = PPOAgent(ppo_model_path(args.self_imitate, args.ppo_model))
     if agent.algo != "discrete" or agent.env_id != "soaring/Soaring-v0":
@@ -334,15 +431,10 @@ def _self_imitation(args: argparse.Namespace) -> int:
         greedy_cost = greedy["energy_spent"] if greedy["success"] else math.inf
         kept = best is not None and best["energy_spent"] <= greedy_cost - args.margin
         if kept and best is not None:
-            plan = SamplerReference(
-                best_cost=best["energy_spent"],
-                direct_cost=math.nan,
-                actions=best["actions"],
-                direct_actions=[],
-                flight_time=best["flight_time"],
-                settings={**settings, "greedy_cost": greedy["energy_spent"] if greedy["success"] else None},
-                rollouts=0,
-                seconds=round(time.perf_counter() - t1, 3),
+            plan = _flown_plan(
+                best,
+                {**settings, "greedy_cost": greedy["energy_spent"] if greedy["success"] else None},
+                time.perf_counter() - t1,
                 candidate_costs=[[[a, c] for a, c in step] for step in best.get("candidate_costs", [])],
             )
             copy = dataclasses.replace(sc, name=f"{name}-{args.tag}s0")

@@ -106,6 +106,13 @@ class SoaringEnvConfig:
     :param gamma_range_deg: ``"physical"`` envelope: (low, high) flight-path angle [deg].
     :param history_length: number H of past edges in the observation (each: mean lift, climb rate,
         course change); 0 (default) adds none.
+    :param history_positions: each history edge also gives where its lift was sensed: the edge's
+        time midpoint relative to the aircraft now, north and east / ``position_scale`` [m] (what
+        a glider's logger pairs with its variometer; entries ``history_<j>_north`` / ``_east``,
+        zero for edges not yet flown). Needs ``history_length`` > 0. Default False.
+    :param observe_start: add where the episode started relative to the aircraft, north and east /
+        ``position_scale`` [m] (entries ``start_north``, ``start_east``: what a glider's GPS gives;
+        lets a policy on the sensed tier search around, and stay near, its start). Default False.
     :param sensor_noise: standard deviation [m/s] of Gaussian noise on the sensed lift entries
         (``updraft``, ``edge_lift``, the history's lift), drawn from the episode's seed; 0: exact.
     :param time_limit: flight time [s] after which an episode is truncated, or ``None`` (default:
@@ -146,6 +153,8 @@ class SoaringEnvConfig:
     airspeed_range: tuple[float, float] = (12.0, 25.0)
     gamma_range_deg: tuple[float, float] = (-30.0, 20.0)
     history_length: int = 0
+    history_positions: bool = False
+    observe_start: bool = False
     sensor_noise: float = 0.0
     time_limit: float | None = None
     max_steps: int | None = MAX_EPISODE_STEPS
@@ -187,6 +196,10 @@ class SoaringEnvConfig:
         for name in ("airspeed_range", "gamma_range_deg"):
             object.__setattr__(self, name, check_pair(name, getattr(self, name), -100.0, 100.0))
         check_int("history_length", self.history_length, 0, MAX_HISTORY)
+        check_bool("history_positions", self.history_positions)
+        check_bool("observe_start", self.observe_start)
+        if self.history_positions and not self.history_length:
+            raise ConfigError("history_positions=True needs history_length > 0 (allowed with history_length=0: False)")
         object.__setattr__(self, "sensor_noise", check_range("sensor_noise", self.sensor_noise, 0.0, 10.0))
         if self.time_limit is not None:
             tl = check_range("time_limit", self.time_limit, self.duration, 1e7)

@@ -20,6 +20,7 @@ from soaring_env.env._kernels import CRASH, FLYING, GOAL, OUT_OF_BOUNDS, step_ro
 from soaring_env.env.config import ENERGY_SCALE, SoaringEnvConfig, choose_scenario, make_config, resolve_scenario
 from soaring_env.env.observation import (
     HISTORY_FEATURES,
+    HISTORY_POSITION_FEATURES,
     N_BASE,
     N_GOAL,
     N_PARAMS,
@@ -241,15 +242,27 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
                 gamma_deg=cfg.gamma_range_deg,
             )
         )
-        self._extras = self.task_extras + (("time_left",) if cfg.time_limit is not None else ())
+        self._extras = (
+            self.task_extras
+            + (("time_left",) if cfg.time_limit is not None else ())
+            + (("start_north", "start_east") if cfg.observe_start else ())
+        )
         self._hist_len = cfg.history_length
+        self._hist_pos = cfg.history_positions
         names, low, high = observation_layout(
-            cfg.observe_thermals, cfg.n_obs_thermals, goal=self.has_goal, extras=self._extras, history=self._hist_len
+            cfg.observe_thermals,
+            cfg.n_obs_thermals,
+            goal=self.has_goal,
+            extras=self._extras,
+            history=self._hist_len,
+            history_positions=self._hist_pos,
         )
         #: where the task's entries, the history and the thermal slots start in the observation
         self._extra_base = N_BASE if self.has_goal else N_BASE - N_GOAL
         self._hist_base = self._extra_base + len(self._extras)
-        self._th_base = self._hist_base + len(HISTORY_FEATURES) * self._hist_len
+        #: entries per history edge (lift, climb, turn; with positions also north, east)
+        self._hist_width = len(HISTORY_FEATURES) + (len(HISTORY_POSITION_FEATURES) if self._hist_pos else 0)
+        self._th_base = self._hist_base + self._hist_width * self._hist_len
         self._goal_on = int(self.has_goal)
         self._noise_sigma = float(cfg.sensor_noise)
         self._time_limit = math.inf if cfg.time_limit is None else float(cfg.time_limit)
@@ -290,7 +303,7 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         self._sampler: ScenarioSampler | None = None
         self._noise = np.zeros((1, 2))
         self._noise_key = np.zeros(1, dtype=np.uint64)
-        self._history = np.zeros((1, self._hist_len, len(HISTORY_FEATURES)))
+        self._history = np.zeros((1, self._hist_len, self._hist_width))
         self.scenario: Scenario = first
         self._install(self.scenario)
         self._start_episode()
@@ -363,27 +376,51 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         battery_left: np.ndarray,
         budget: np.ndarray,
         history: np.ndarray,
+        positions: np.ndarray,
+        starts: np.ndarray,
+        n_flown: np.ndarray,
     ) -> None:
-        """Write the task's extra entries and the ``history`` (B, H, 3) of envs ``rows`` into ``obs``
-        (batched: the single env passes one row, the vector env all of its own)."""
+        """Write the task's extra entries and the ``history`` (B, H, W) of envs ``rows`` into ``obs``
+        (batched: the single env passes one row, the vector env all of its own). ``positions``,
+        ``starts`` (B, 2): the aircraft's north and east now and at the episode's start [m];
+        ``n_flown`` (B,): edges flown so far (the history's positions are relative to
+        ``positions``, zero where no edge was flown yet)."""
         i = self._extra_base
         for key in self._extras:
             if key == "battery":
                 v = battery_left[rows] / budget[rows]
-            else:  # time_left
+            elif key == "time_left":
                 v = np.maximum(self._time_limit - times[rows], 0.0) / self._time_limit
-            obs[rows, i] = np.clip(v, 0.0, 1.0)
+            else:  # start_north, start_east
+                c = 0 if key == "start_north" else 1
+                v = (starts[rows, c] - positions[rows, c]) / self.config.position_scale
+            obs[rows, i] = np.clip(v, self._low[i], self._high[i])
             i += 1
         if self._hist_len:
             lo = self._low[self._hist_base : self._th_base]
             hi = self._high[self._hist_base : self._th_base]
-            obs[rows, self._hist_base : self._th_base] = np.clip(history[rows].reshape(len(rows), -1), lo, hi)
+            h = history[rows]
+            if self._hist_pos:
+                p = len(HISTORY_FEATURES)
+                rel = (h[:, :, p:] - positions[rows, None, :]) / self.config.position_scale
+                flown = np.arange(self._hist_len)[None, :] < n_flown[rows, None]
+                h[:, :, p:] = np.where(flown[:, :, None], rel, 0.0)
+            obs[rows, self._hist_base : self._th_base] = np.clip(h.reshape(len(rows), -1), lo, hi)
 
     def _push_history(
-        self, history: np.ndarray, lift: np.ndarray, dh: np.ndarray, dchi: np.ndarray, flown: np.ndarray
+        self,
+        history: np.ndarray,
+        lift: np.ndarray,
+        dh: np.ndarray,
+        dchi: np.ndarray,
+        flown: np.ndarray,
+        out: np.ndarray,
+        ks: np.ndarray,
     ) -> None:
-        """Shift ``history`` (B, H, 3) and put the last edge first: mean (sensed) lift and climb rate
-        over the flown time ``flown`` [s] (scaled like the updraft), course change / pi."""
+        """Shift ``history`` (B, H, W) and put the last edge first: mean (sensed) lift and climb rate
+        over the flown time ``flown`` [s] (scaled like the updraft), course change / pi; with
+        positions, the north and east [m] of the edge's time midpoint (point ``ks // 2`` of its
+        flown points ``out``, B x N x 4; ``ks`` the last flown point's index)."""
         if not self._hist_len:
             return
         h = history
@@ -393,6 +430,9 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
         h[rows, 0, 0] = lift / us
         h[rows, 0, 1] = dh / flown / us
         h[rows, 0, 2] = (dchi + math.pi) % (2.0 * math.pi) / math.pi - 1.0
+        if self._hist_pos:
+            p = len(HISTORY_FEATURES)
+            h[rows, 0, p:] = out[np.arange(out.shape[0]), ks // 2, :2]
 
     def reward_terms(self, cost, d_prev, d_new, code) -> dict[str, Any]:
         """The reward terms of an edge -- floats for one edge, arrays for a batch (the vector env).
@@ -494,7 +534,15 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
             obs,
         )
         self._fill_task_entries(
-            obs, _ZERO_ROW, np.zeros(1), np.array([self.battery_left]), np.array([self.battery]), self._history
+            obs,
+            _ZERO_ROW,
+            np.zeros(1),
+            np.array([self.battery_left]),
+            np.array([self.battery]),
+            self._history,
+            self.state[None, :2],
+            self.state[None, :2],
+            np.zeros(1, dtype=np.int64),
         )
         self._d_goal = float(self._dist[0])
         self.updraft = float(self._upd[0])
@@ -586,9 +634,19 @@ class SoaringBaseEnv(gym.Env[np.ndarray, Any]):
                 new_state[:, 3] - x0[:, 3],
                 new_state[:, 2] - x0[:, 2],
                 np.array([(k + 1) * self._dt]),
+                out,
+                self._ks,
             )
             self._fill_task_entries(
-                obs, _ZERO_ROW, self._tn, np.array([self.battery_left]), np.array([self.battery]), self._history
+                obs,
+                _ZERO_ROW,
+                self._tn,
+                np.array([self.battery_left]),
+                np.array([self.battery]),
+                self._history,
+                new_state[:, :2],
+                self.scenario.start_state[None, :2],
+                np.array([self.steps + 1]),
             )
         airspeed = float(ctrl[0, 0])
         d_new = float(self._dist[0])

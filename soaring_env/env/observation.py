@@ -82,8 +82,13 @@ assert (P_WN, P_DVY) == (N_CLASSIFY_PARAMS + FP_WIND_NORTH, N_CLASSIFY_PARAMS + 
 TASK_FEATURES = {
     "battery": ("battery", 0.0, 1.0),  # battery left / budget
     "time_left": ("time_left", 0.0, 1.0),  # flight time left / time limit
+    "start_north": ("start_north", -10.0, 10.0),  # (start north - Pn) / position_scale [m]
+    "start_east": ("start_east", -10.0, 10.0),  # (start east - Pe) / position_scale [m]
 }
 HISTORY_FEATURES = (("lift", -4.0, 4.0), ("climb", -4.0, 4.0), ("turn", -1.0, 1.0))
+#: with ``history_positions``: where a past edge's lift was sensed (its time midpoint) relative to
+#: the aircraft now, north and east / position_scale [m]
+HISTORY_POSITION_FEATURES = (("north", -10.0, 10.0), ("east", -10.0, 10.0))
 N_GOAL = 3  # the goal entries lead the base entries
 
 
@@ -94,15 +99,17 @@ def observation_layout(
     goal: bool = True,
     extras: tuple[str, ...] = (),
     history: int = 0,
+    history_positions: bool = False,
 ) -> tuple[list[str], np.ndarray, np.ndarray]:
     """Names, lower and upper bounds (float32) of the observation vector: the base entries (without
     the three goal entries for tasks without a goal), the task's ``extras`` (keys of
-    :data:`TASK_FEATURES`), ``history`` x (lift, climb, turn) of the last edges (newest first),
-    then the thermal slots."""
+    :data:`TASK_FEATURES`), ``history`` x (lift, climb, turn and, with ``history_positions``, north,
+    east) of the last edges (newest first), then the thermal slots."""
     feats = list(BASE_FEATURES if goal else BASE_FEATURES[N_GOAL:])
     feats += [TASK_FEATURES[k] for k in extras]
+    per_edge = HISTORY_FEATURES + (HISTORY_POSITION_FEATURES if history_positions else ())
     for j in range(history):
-        feats += [(f"history_{j}_{name}", lo, hi) for name, lo, hi in HISTORY_FEATURES]
+        feats += [(f"history_{j}_{name}", lo, hi) for name, lo, hi in per_edge]
     if observe_thermals:
         for j in range(n_thermals):
             feats += [(f"thermal_{j}_{name}", lo, hi) for name, lo, hi in THERMAL_FEATURES]

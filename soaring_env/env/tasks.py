@@ -167,7 +167,8 @@ _CLIMB_DOC = """Thermal climb: gain as much specific energy as possible in a fix
 
     The goal-reaching observation without the three goal entries, then ``time_left`` (flight time
     left / time limit), the history (``history_length`` edges of mean lift, climb rate and course
-    change, newest first; 0 by default) and the thermal slots (privileged tier; ``observe_thermals=False``
+    change, newest first; 0 by default; ``history_positions=True`` adds where each edge's lift was
+    sensed, relative to the aircraft) and the thermal slots (privileged tier; ``observe_thermals=False``
     gives the sensed tier). ``env.unwrapped.observation_names`` lists the entries; the README's
     "Observation tiers" table documents them.
 

@@ -163,7 +163,7 @@ class _SoaringVectorBase(VectorEnv):
         self._prev_done = np.zeros(b, dtype=np.bool_)
         self._no_skip = np.zeros(b, dtype=np.bool_)
         #: the edges of the last step (B, N, 4), rewritten by every step
-        self._out = np.empty((b, tmpl.library.n_points, 4))
+        self._out = np.zeros((b, tmpl.library.n_points, 4))
         self._prm = np.zeros((b, N_PARAMS))
         self._th = np.zeros((b, 1, PACKED_COLUMNS))
         self._nth = np.zeros(b, dtype=np.int64)
@@ -209,7 +209,7 @@ class _SoaringVectorBase(VectorEnv):
         self.battery_left = np.full(b, np.inf)
         self._noise = np.zeros((b, 2))
         self._noise_key = np.zeros(b, dtype=np.uint64)
-        self._history = np.zeros((b, tmpl._hist_len, 3))
+        self._history = np.zeros((b, tmpl._hist_len, tmpl._hist_width))
 
     # --- scenario bookkeeping ------------------------------------------------------------------------
     def _rng(self, i: int) -> np.random.Generator:
@@ -370,7 +370,17 @@ class _SoaringVectorBase(VectorEnv):
             obs,
         )
         if t._extras or t._hist_len:
-            t._fill_task_entries(obs, rows, self.times, self.battery_left, self.battery, self._history)
+            t._fill_task_entries(
+                obs,
+                rows,
+                self.times,
+                self.battery_left,
+                self.battery,
+                self._history,
+                self.states[:, :2],
+                self._start[:, :2],
+                self.steps,
+            )
         self._d_goal[rows] = self._dist[rows]
 
     def _reset_info(self, rows: np.ndarray, infos: dict[str, Any]) -> None:
@@ -522,9 +532,25 @@ class _SoaringVectorBase(VectorEnv):
             flown = (ks + 1) * t._dt
             lift = self._lift + self._noise[:, 1]
             t._push_history(
-                self._history, lift, new_states[:, 3] - self.states[:, 3], new_states[:, 2] - self.states[:, 2], flown
+                self._history,
+                lift,
+                new_states[:, 3] - self.states[:, 3],
+                new_states[:, 2] - self.states[:, 2],
+                flown,
+                out,
+                ks,
             )
-            t._fill_task_entries(obs, self._env_index, t_new, self.battery_left, self.battery, self._history)
+            t._fill_task_entries(
+                obs,
+                self._env_index,
+                t_new,
+                self.battery_left,
+                self.battery,
+                self._history,
+                new_states[:, :2],
+                self._start[:, :2],
+                self.steps + 1,
+            )
         cost = tt[3]
         airspeed = ctrl[:, 0].copy()
         d_new = self._dist.copy()
