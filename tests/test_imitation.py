@@ -1003,9 +1003,10 @@ def test_climb_demos_are_the_controllers_episodes_and_a_dagger_round_shadows_the
         demonstrations(
             out, lambda sc: make_eval_env(climb, [sc], {**sensed, "time_limit": 60}), sampler="continuous", gamma=0.99
         )
-    with pytest.raises(SystemExit) as exc:
-        main(["--sampler", "primitive", *common])
-    assert exc.value.code == 2 and "--task climb" in capsys.readouterr().err
+    for bad in (["--sampler", "primitive"], ["--time-weight", "1"], ["--lookahead", "4"], ["--every", "0"]):
+        with pytest.raises(SystemExit) as exc:
+            main([*bad, *common])
+        assert exc.value.code == 2 and bad[0] in capsys.readouterr().err
 
 
 def test_sampled_episodes_draw_from_the_tempered_softmax() -> None:

@@ -154,9 +154,10 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"--tag={args.tag!r}: letters and digits only")
     env_kwargs = _env_kwargs(p, args.env_kwargs)
     if args.task == "climb":
-        if args.self_imitate is not None or args.sampler != "continuous" or args.failed_only:
-            p.error("--task climb: the controller's continuous episodes (no --self-imitate, --sampler primitive "
-                    "or --failed-only)")  # fmt: skip
+        searched = (args.self_imitate, args.lookahead, args.time_weight, args.min_height)
+        if any(v is not None for v in searched) or args.sampler != "continuous" or args.failed_only:
+            p.error("--task climb: the controller's continuous episodes (no search settings: --self-imitate, "
+                    "--lookahead, --time-weight, --min-height, --sampler primitive or --failed-only)")  # fmt: skip
         try:
             return _controller_demos(args, env_kwargs)
         except (ConfigError, FileNotFoundError, ValueError) as exc:
