@@ -31,7 +31,15 @@ from typing import Any, Protocol, cast, runtime_checkable
 import gymnasium as gym
 import numpy as np
 
-from soaring_env._validation import ConfigError, check_finite, check_int, check_positive, check_range
+from soaring_env._validation import (
+    ConfigError,
+    check_choice,
+    check_finite,
+    check_int,
+    check_positive,
+    check_range,
+    check_type,
+)
 from soaring_env.primitives import COL_AIRSPEED, COL_CHI_DOT_1, COL_CHI_DOT_2, COL_FAMILY, COL_GAMMA, SPIRAL
 
 __all__ = [
@@ -376,6 +384,10 @@ def fit_gaussian_thermal(
     return float(p[0]), float(p[1]), float(p[2]), float(p[3])
 
 
+#: :class:`ThermallingAgent`'s ``search``: where the search spiral's phase comes from.
+SEARCH_RULES = ("spiral", "arm")
+
+
 class ThermallingAgent(HeuristicAgent):
     """A thermalling autopilot on sensed lift alone: a variometer log along its own path, a thermal
     model fitted to it, and an orbit that keeps its circle on the fitted centre.
@@ -410,7 +422,11 @@ class ThermallingAgent(HeuristicAgent):
     Without a goal (the thermal climb) it searches along an Archimedean spiral about the start,
     ``search_spacing`` metres between turns (out to ``search_radius``, then inwards again), at the
     flattest zero-thrust glide (level below 120 m), steering by pure pursuit at a point two steps
-    ahead on the spiral (aiming one step ahead made it zigzag).
+    ahead on the spiral (aiming one step ahead made it zigzag). With ``search="spiral"`` (default)
+    the spiral keeps its own phase, which advances only as the aircraft reaches the target point and
+    pauses while it circles; with ``search="arm"`` the phase is that of the spiral arm through the
+    aircraft's own position, so the search command is a function of where the aircraft is and
+    heads (what a policy that observes its position can imitate).
 
     On the discrete env the nearest allowed primitive is flown (as :class:`HeuristicAgent`).
 
@@ -433,6 +449,7 @@ class ThermallingAgent(HeuristicAgent):
     :param tabu_radius: distance [m] to a left thermal within which it does not enter again.
     :param tabu_time: how long [s] a left thermal stays tabu.
     :param search_spacing: distance [m] between the search spiral's turns.
+    :param search: ``"spiral"`` (default) or ``"arm"``: where the search spiral's phase comes from.
     :param ceiling, search_radius: as :class:`HeuristicAgent`.
     :param name: label in results.
     """
@@ -456,6 +473,7 @@ class ThermallingAgent(HeuristicAgent):
         tabu_time: float = 300.0,
         ceiling: float = 0.75,
         search_radius: float = 1000.0,
+        search: str = "spiral",
         name: str = "thermalling",
     ) -> None:
         super().__init__(lift_threshold=enter_lift, ceiling=ceiling, search_radius=search_radius, name=name)
@@ -471,13 +489,16 @@ class ThermallingAgent(HeuristicAgent):
         self.tabu_radius = check_range("tabu_radius", tabu_radius, 0.0, 1e6)
         self.tabu_time = check_range("tabu_time", tabu_time, 0.0, 1e7)
         self.search_spacing = check_range("search_spacing", search_spacing, 1.0, 1e5)
+        check_type("search", search, str)
+        self.search = check_choice("search", search, SEARCH_RULES)
         self._reset_memory()
 
     def settings(self) -> dict[str, Any]:
         """The rule's version and every setting: what a results record keys this agent by."""
         names = ("enter_lift", "exit_lift", "exit_window", "centre_window", "radius", "min_circle", "entry_samples")
         more = ("sensor_noise", "tabu_radius", "tabu_time", "search_spacing", "ceiling", "search_radius")
-        return {"rule": self.RULE, **{n: getattr(self, n) for n in names + more}}
+        extra = {"search": self.search} if self.search != "spiral" else {}  # older records stay current
+        return {"rule": self.RULE, **{n: getattr(self, n) for n in names + more}, **extra}
 
     def _reset_memory(self) -> None:
         self._log: list[tuple[float, float, float, float]] = []  # (north, east, time, lift) since entering
@@ -609,6 +630,13 @@ class ThermallingAgent(HeuristicAgent):
             r = self.search_spacing * min(m, 2.0 * period - m) / (2.0 * math.pi)
             return sc.start[0] + r * math.cos(phi + sc.start[2]), sc.start[1] + r * math.sin(phi + sc.start[2])
 
+        if self.search == "arm":  # the phase of the arm through the aircraft (the growing branch)
+            theta = (math.atan2(pe - sc.start[1], pn - sc.start[0]) - sc.start[2]) % (2.0 * math.pi)
+            turns = 2.0 * math.pi * math.hypot(pn - sc.start[0], pe - sc.start[1]) / self.search_spacing
+            k = max(0, round((turns - theta) / (2.0 * math.pi)))
+            while k > 0 and theta + 2.0 * math.pi * k > period:
+                k -= 1
+            self._phi = theta + 2.0 * math.pi * k
         for _ in range(10_000):  # advance the target until it lies two steps ahead
             tn, te = point(self._phi)
             if math.hypot(tn - pn, te - pe) >= ahead:

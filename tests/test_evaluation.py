@@ -312,6 +312,34 @@ def test_thermalling_search_spiral_turns_one_way() -> None:
     assert len(signs) == 1
 
 
+def test_thermalling_arm_search_is_a_function_of_the_position() -> None:
+    """``search="arm"`` takes the spiral's phase from the aircraft's position: an agent that has
+    searched for 20 steps and a fresh one commands the same from the same state, where the
+    default spiral (its own phase) does not; the arm search also turns one way; bad values raise."""
+    env, _ = _climb_on_a_thermal(offset=2500.0)  # nothing within reach
+    commands = {}
+    for search in ("spiral", "arm"):
+        env.reset(seed=0)
+        flown = ThermallingAgent(search=search)
+        flown.reset(env, 0)
+        turns = []
+        for _ in range(20):
+            action, _ = flown.predict(None)
+            turns.append(flown.intent()[1])
+            env.step(action)
+        fresh = ThermallingAgent(search=search)
+        fresh.reset(env, 0)
+        commands[search] = (flown.intent(), fresh.intent())
+        assert len({float(np.sign(t)) for t in turns[2:] if abs(t) > 1e-6}) == 1
+    assert commands["arm"][0] == commands["arm"][1]
+    assert commands["spiral"][0] != commands["spiral"][1]
+    assert ThermallingAgent(search="arm").settings()["search"] == "arm"
+    assert "search" not in ThermallingAgent().settings()  # the default's records stay current
+    for bad in ("ring", 1, None):
+        with pytest.raises(ConfigError, match="search"):
+            ThermallingAgent(search=bad)  # type: ignore[arg-type]
+
+
 def test_thermalling_sensor_noise_is_seeded_and_single_peaks_do_not_enter() -> None:
     """``sensor_noise`` is drawn from the reset's seed (same seed, same episode; another seed, another);
     without it the log is the field's exact lift; the entry test averages ``entry_samples`` samples, so

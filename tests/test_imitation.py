@@ -1003,10 +1003,21 @@ def test_climb_demos_are_the_controllers_episodes_and_a_dagger_round_shadows_the
         demonstrations(
             out, lambda sc: make_eval_env(climb, [sc], {**sensed, "time_limit": 60}), sampler="continuous", gamma=0.99
         )
-    for bad in (["--sampler", "primitive"], ["--time-weight", "1"], ["--lookahead", "4"], ["--every", "0"]):
+    arm = tmp_path / "arm"  # the controller's keywords: the search arm through the aircraft
+    assert main(["--scenarios", "1", *common[:-1], str(arm), "--controller-kwargs", '{"search": "arm"}']) == 0
+    assert load_reference(arm / "climb-20000.json").samplers["continuous"].settings["search"] == "arm"
+    bad_kwargs = [["--controller-kwargs", k] for k in ('{"nope": 1}', '{"search": "ring"}', "[1]")]
+    for bad in (
+        ["--sampler", "primitive"],
+        ["--time-weight", "1"],
+        ["--lookahead", "4"],
+        ["--every", "0"],
+        *bad_kwargs,
+    ):
         with pytest.raises(SystemExit) as exc:
             main([*bad, *common])
-        assert exc.value.code == 2 and bad[0] in capsys.readouterr().err
+        err = capsys.readouterr().err
+        assert exc.value.code == 2 and (bad[0] in err or "search=" in err), err
 
 
 def test_sampled_episodes_draw_from_the_tempered_softmax() -> None:

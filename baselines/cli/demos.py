@@ -143,6 +143,13 @@ def main(argv: list[str] | None = None) -> int:
         "defaults, or with --dagger the run's), e.g. goal reaching at Ts = 10 s: "
         '\'{"duration": 10, "envelope": "physical", "n_points": 10, "max_steps": 120, "time_limit": 1200}\'',
     )
+    p.add_argument(
+        "--controller-kwargs",
+        default=None,
+        metavar="JSON",
+        help="--task climb: the thermalling controller's keywords, a JSON object (ThermallingAgent), e.g. "
+        '\'{"search": "arm"}\'',
+    )
     p.add_argument("--out", type=Path, default=Path("results/reference-train"), help="output directory")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_backend_args(p, "one per CPU core")
@@ -155,13 +162,16 @@ def main(argv: list[str] | None = None) -> int:
     env_kwargs = _env_kwargs(p, args.env_kwargs)
     if args.task == "climb":
         searched = (args.self_imitate, args.lookahead, args.time_weight, args.min_height)
+        controller = _json_object(p, "--controller-kwargs", args.controller_kwargs, "ThermallingAgent keywords") or {}
         if any(v is not None for v in searched) or args.sampler != "continuous" or args.failed_only:
             p.error("--task climb: the controller's continuous episodes (no search settings: --self-imitate, "
                     "--lookahead, --time-weight, --min-height, --sampler primitive or --failed-only)")  # fmt: skip
         try:
-            return _controller_demos(args, env_kwargs)
+            return _controller_demos(args, env_kwargs, controller)
         except (ConfigError, FileNotFoundError, ValueError) as exc:
             p.error(str(exc))
+    if args.controller_kwargs is not None:
+        p.error("--controller-kwargs goes with --task climb")
     if args.self_imitate is not None:
         if args.dagger is not None or args.task != "goal" or env_kwargs:
             p.error("--self-imitate goes with goal reaching alone (no --dagger, --task xc or --env-kwargs)")
@@ -229,15 +239,23 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _env_kwargs(p: argparse.ArgumentParser, text: str | None) -> dict[str, Any] | None:
-    """``--env-kwargs`` as a dict (None: not given); bad JSON or a non-object is a usage error."""
+def _json_object(p: argparse.ArgumentParser, flag: str, text: str | None, what: str) -> dict[str, Any] | None:
+    """``flag``'s JSON object as a dict (None: not given); bad JSON or a non-object is a usage error."""
     if text is None:
         return None
     try:
         value = json.loads(text)
     except json.JSONDecodeError as exc:
-        p.error(f"--env-kwargs={text!r} is not JSON ({exc.msg}); a JSON object of gym.make keywords is required")
-    if not isinstance(value, dict) or "scenario" in value:
+        p.error(f"{flag}={text!r} is not JSON ({exc.msg}); a JSON object of {what} is required")
+    if not isinstance(value, dict):
+        p.error(f"{flag}={text!r}: a JSON object of {what} is required")
+    return value
+
+
+def _env_kwargs(p: argparse.ArgumentParser, text: str | None) -> dict[str, Any] | None:
+    """``--env-kwargs`` as a dict (None: not given); bad JSON, a non-object or a scenario is a usage error."""
+    value = _json_object(p, "--env-kwargs", text, "gym.make keywords (no 'scenario': --scenarios)")
+    if value is not None and "scenario" in value:
         p.error(f"--env-kwargs={text!r}: a JSON object of gym.make keywords (no 'scenario': --scenarios) is required")
     return value
 
@@ -308,7 +326,7 @@ def _flown_plan(episode: dict[str, Any], settings: dict[str, Any], seconds: floa
     )
 
 
-def _controller_demos(args: argparse.Namespace, env_kwargs: dict[str, Any] | None) -> int:
+def _controller_demos(args: argparse.Namespace, env_kwargs: dict[str, Any] | None, controller: dict[str, Any]) -> int:
     """``--task climb``: the thermalling controller (:class:`baselines.agents.ThermallingAgent`,
     sensed lift only) flies each scenario, or with ``--dagger`` each state the run visits after
     shadowing the run's steps there (:func:`baselines.imitation.controller_plan`); each episode
@@ -329,7 +347,11 @@ def _controller_demos(args: argparse.Namespace, env_kwargs: dict[str, Any] | Non
         env_kwargs = _run_env_kwargs(args.dagger, args.ppo_model, env_kwargs)
         scenarios, prefixes = _dagger_starts(args, scenarios, task=True)
     kwargs = dict(env_kwargs or {})
-    settings: dict[str, Any] = {"demonstrator": "thermalling", **ThermallingAgent().settings()}
+    try:
+        ThermallingAgent(**controller)
+    except TypeError as exc:  # an unknown keyword
+        raise ConfigError(f"--controller-kwargs={controller!r}: {exc}") from None
+    settings: dict[str, Any] = {"demonstrator": "thermalling", **ThermallingAgent(**controller).settings()}
     if args.dagger is not None:
         settings |= {"dagger": str(args.dagger), "ppo_model": args.ppo_model, "every": args.every}
     if kwargs:
@@ -352,7 +374,10 @@ def _controller_demos(args: argparse.Namespace, env_kwargs: dict[str, Any] | Non
     for sc in todo:
         t1 = time.perf_counter()
         plan = controller_plan(
-            lambda s: make_env(task_id, {**kwargs, "scenario": s}), ThermallingAgent(), sc, prefixes.get(sc.name, ())
+            lambda s: make_env(task_id, {**kwargs, "scenario": s}),
+            ThermallingAgent(**controller),
+            sc,
+            prefixes.get(sc.name, ()),
         )
         if plan["terminated"]:
             ended += 1
