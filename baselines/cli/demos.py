@@ -332,7 +332,8 @@ def _controller_demos(args: argparse.Namespace, env_kwargs: dict[str, Any] | Non
     shadowing the run's steps there (:func:`baselines.imitation.controller_plan`); each episode
     that flies to the time limit becomes a plan file in the reference format (one per scenario,
     atomically; a rerun skips files with the same settings). Episodes the controller ends on the
-    ground or outside the domain are counted, not written."""
+    ground or outside the domain are counted, not written. ``controller``: the controller's keywords
+    (``--controller-kwargs``), recorded with its settings in every plan."""
     from baselines._runs import progress_bar
     from baselines.agents import ThermallingAgent
     from baselines.evaluation import make_env
@@ -348,10 +349,10 @@ def _controller_demos(args: argparse.Namespace, env_kwargs: dict[str, Any] | Non
         scenarios, prefixes = _dagger_starts(args, scenarios, task=True)
     kwargs = dict(env_kwargs or {})
     try:
-        ThermallingAgent(**controller)
+        demonstrator = ThermallingAgent(**controller)
     except TypeError as exc:  # an unknown keyword
         raise ConfigError(f"--controller-kwargs={controller!r}: {exc}") from None
-    settings: dict[str, Any] = {"demonstrator": "thermalling", **ThermallingAgent(**controller).settings()}
+    settings: dict[str, Any] = {"demonstrator": "thermalling", **demonstrator.settings()}
     if args.dagger is not None:
         settings |= {"dagger": str(args.dagger), "ppo_model": args.ppo_model, "every": args.every}
     if kwargs:
