@@ -384,8 +384,15 @@ def fit_gaussian_thermal(
     return float(p[0]), float(p[1]), float(p[2]), float(p[3])
 
 
+#: Mean course rate [rad/s] over the last edge (a circle in 21 s) from which :class:`ThermallingAgent`
+#: takes the way round it circles from the flown path: only a policy it shadows turns that hard the
+#: other way (its own orbit turns its own way round, and its search turns less before it enters).
+ADOPT_RATE = 0.3
+
 #: :class:`ThermallingAgent`'s ``search``: where the search spiral's phase comes from.
-SEARCH_RULES = ("spiral", "arm")
+SEARCH_RULES = ("spiral", "arm", "time")
+#: :class:`ThermallingAgent`'s ``entry``: which lift samples decide entering a thermal.
+ENTRY_RULES = ("edge", "now")
 
 
 class ThermallingAgent(HeuristicAgent):
@@ -402,7 +409,10 @@ class ThermallingAgent(HeuristicAgent):
        when the lift logged along the last edge, averaged over ``entry_samples`` consecutive samples
        (a noisy variometer's single peaks are no thermal), peaked at ``enter_lift`` or more and a climb is useful
        (:meth:`climb_useful`), and not within ``tabu_radius`` of a thermal it left less than
-       ``tabu_time`` ago: start circling, towards the side where the last edge's lift grew.
+       ``tabu_time`` ago: start circling, towards the side where the last edge's lift grew. Where the
+       last edge already turned at :data:`ADOPT_RATE` or more, the circle goes that way round, and
+       keeps to the way the aircraft turns while circling: flying itself that is always its own way,
+       but shadowing a policy (a DAgger round) it continues the policy's circle instead of reversing it.
     2. **Centre** -- a Gaussian thermal ``W exp(-d^2 / R^2)`` is fitted to the points logged in the last
        ``centre_window`` seconds (:func:`fit_gaussian_thermal`; the thermal model of ArduSoar, Tabor,
        Guilliard & Kassab, IROS 2018, fitted by least squares over a window instead of their EKF),
@@ -426,7 +436,10 @@ class ThermallingAgent(HeuristicAgent):
     the spiral keeps its own phase, which advances only as the aircraft reaches the target point and
     pauses while it circles; with ``search="arm"`` the phase is that of the spiral arm through the
     aircraft's own position, so the search command is a function of where the aircraft is and
-    heads (what a policy that observes its position can imitate).
+    heads (what a policy that observes its position can imitate), but between two arms it jumps
+    from one to the other; with ``search="time"`` it circles the start clockwise at the radius the
+    spiral would have reached by now (:meth:`_time_search_turn`), a smooth function of the start's
+    offset, the course and the time left, all in the sensed tier's observation.
 
     On the discrete env the nearest allowed primitive is flown (as :class:`HeuristicAgent`).
 
@@ -449,13 +462,17 @@ class ThermallingAgent(HeuristicAgent):
     :param tabu_radius: distance [m] to a left thermal within which it does not enter again.
     :param tabu_time: how long [s] a left thermal stays tabu.
     :param search_spacing: distance [m] between the search spiral's turns.
-    :param search: ``"spiral"`` (default) or ``"arm"``: where the search spiral's phase comes from.
+    :param search: ``"spiral"`` (default), ``"arm"`` or ``"time"``: where the search spiral's phase
+        (or, ``"time"``, its radius) comes from.
+    :param entry: ``"edge"`` (default): the smoothed samples of the whole last edge decide entering;
+        ``"now"``: the lift at the aircraft alone, the sensed tier's ``updraft`` entry (what a policy
+        that sees only the observation can imitate).
     :param ceiling, search_radius: as :class:`HeuristicAgent`.
     :param name: label in results.
     """
 
     #: The rule's version, recorded with every result it flies (a changed rule flies again).
-    RULE = "sensed-v2"
+    RULE = "sensed-v3"
 
     def __init__(
         self,
@@ -474,6 +491,7 @@ class ThermallingAgent(HeuristicAgent):
         ceiling: float = 0.75,
         search_radius: float = 1000.0,
         search: str = "spiral",
+        entry: str = "edge",
         name: str = "thermalling",
     ) -> None:
         super().__init__(lift_threshold=enter_lift, ceiling=ceiling, search_radius=search_radius, name=name)
@@ -491,6 +509,8 @@ class ThermallingAgent(HeuristicAgent):
         self.search_spacing = check_range("search_spacing", search_spacing, 1.0, 1e5)
         check_type("search", search, str)
         self.search = check_choice("search", search, SEARCH_RULES)
+        check_type("entry", entry, str)
+        self.entry = check_choice("entry", entry, ENTRY_RULES)
         self._reset_memory()
 
     def settings(self) -> dict[str, Any]:
@@ -498,6 +518,7 @@ class ThermallingAgent(HeuristicAgent):
         names = ("enter_lift", "exit_lift", "exit_window", "centre_window", "radius", "min_circle", "entry_samples")
         more = ("sensor_noise", "tabu_radius", "tabu_time", "search_spacing", "ceiling", "search_radius")
         extra = {"search": self.search} if self.search != "spiral" else {}  # older records stay current
+        extra |= {"entry": self.entry} if self.entry != "edge" else {}
         return {"rule": self.RULE, **{n: getattr(self, n) for n in names + more}, **extra}
 
     def _reset_memory(self) -> None:
@@ -517,8 +538,11 @@ class ThermallingAgent(HeuristicAgent):
         self._noise = np.random.default_rng(0 if seed is None else seed)
 
     def _smoothed(self, edge: list[tuple[float, float, float, float]]) -> np.ndarray:
-        """The edge's lift samples as a moving average over ``entry_samples`` of them (fewer on a short edge)."""
+        """The edge's lift samples as a moving average over ``entry_samples`` of them (fewer on a short
+        edge); with ``entry="now"`` only the last one, the lift at the aircraft."""
         w = np.array([x[3] for x in edge], dtype=np.float64)
+        if self.entry == "now":
+            return w[-1:]
         k = min(self.entry_samples, len(w))
         return np.convolve(w, np.full(k, 1.0 / k), mode="valid")
 
@@ -542,6 +566,13 @@ class ThermallingAgent(HeuristicAgent):
         if self.sensor_noise > 0.0:
             lift = lift + self.sensor_noise * self._noise.standard_normal(len(lift))
         return [(float(p[0]), float(p[1]), float(t), float(w)) for p, t, w in zip(pts, times, lift, strict=True)]
+
+    def _edge_turn(self) -> float:
+        """Course change [rad] over the last edge flown (positive: right), from the env's flown points."""
+        base: Any = self._require_env().unwrapped
+        n = int(base.model.library.n_points)
+        chi = np.asarray(base.path, dtype=np.float64)[-n - 1 :, 2]
+        return float(np.sum((np.diff(chi) + math.pi) % (2.0 * math.pi) - math.pi))
 
     def centre(self) -> tuple[float, float] | None:
         """The thermal centre (north, east) [m] fitted to the recent log (see the class docstring), or None."""
@@ -588,8 +619,11 @@ class ThermallingAgent(HeuristicAgent):
         t = float(base.time)
         edge = self._last_edge()
         self._tabu = [(n, e, until) for n, e, until in self._tabu if until > t]
+        turned = self._edge_turn() if edge else 0.0  # [rad]
         if self._circling:
             self._log.extend(edge)
+            if abs(turned) >= ADOPT_RATE * self._step_duration():  # the way the aircraft turns (a shadowed policy's)
+                self._side = math.copysign(1.0, turned)
             recent = [w for (_, _, tw, w) in self._log if tw >= t - max(self.exit_window, self._step_duration())]
             weak = t - self._entered >= self.min_circle and recent and float(np.mean(recent)) < self.exit_lift
             if not self.climb_useful() or weak:
@@ -608,6 +642,8 @@ class ThermallingAgent(HeuristicAgent):
                 dn, de = edge[k][0] - edge[0][0], edge[k][1] - edge[0][1]
                 cross = math.cos(chi) * de - math.sin(chi) * dn  # > 0: the strongest point lies right
                 self._side = 1.0 if cross >= 0.0 else -1.0
+                if abs(turned) >= ADOPT_RATE * self._step_duration():  # a shadowed policy circling: its way round
+                    self._side = math.copysign(1.0, turned)
         if not self._circling:
             return self.cruise()
         return self._orbit(model, pn, pe, chi)
@@ -621,6 +657,8 @@ class ThermallingAgent(HeuristicAgent):
         model = base.model
         pn, pe, chi, h = (float(v) for v in np.asarray(base.state, dtype=np.float64)[:4])
         v, glide = flattest_glide(model)
+        if self.search == "time":
+            return v, self._time_search_turn(pn, pe, chi, float(base.time), v), (0.0 if h < 120.0 else glide)
         ahead = 2.0 * v * self._step_duration()
         # the spiral's radius grows out to search_radius, then shrinks again (a triangle wave in phi)
         period = 2.0 * math.pi * self.search_radius / self.search_spacing
@@ -646,6 +684,19 @@ class ThermallingAgent(HeuristicAgent):
         # error over its two steps, so one step turns by the bearing error
         turn = max(-math.pi, min(math.pi, _wrap(math.atan2(te - pe, tn - pn) - chi)))
         return v, turn, (0.0 if h < 120.0 else glide)
+
+    def _time_search_turn(self, pn: float, pe: float, chi: float, t: float, v: float) -> float:
+        """``search="time"``: the turn [rad] of one step round the start clockwise at the radius an
+        Archimedean spiral of ``search_spacing`` flown at ``v`` [m/s] reaches after ``t`` seconds
+        (the area flown equals the area swept: r = sqrt(spacing v t / pi), at most ``search_radius``),
+        steering out or in by atan((r - r_t) / spacing): a smooth function of the start's offset, the
+        course and the time."""
+        sc = cast(Any, self._require_env().unwrapped).scenario
+        dn, de = pn - sc.start[0], pe - sc.start[1]
+        r_t = min(math.sqrt(self.search_spacing * v * t / math.pi), self.search_radius)
+        out = math.atan2(de, dn)  # the bearing of the aircraft seen from the start
+        want = out + 0.5 * math.pi + math.atan((math.hypot(dn, de) - r_t) / self.search_spacing)
+        return max(-math.pi, min(math.pi, _wrap(want - chi)))
 
     def _orbit(self, model: Any, pn: float, pe: float, chi: float) -> tuple[float, float, float]:
         """(airspeed, total turn, path angle) of the next step in the thermal (class docstring, 3)."""

@@ -163,6 +163,7 @@ def demonstrations(
             info: dict[str, Any] = {}
             terminated = truncated = False
             first = int(ref.demo_from)  # a DAgger plan: the policy's own steps first, not imitated
+            labels = ref.labels or ref.actions  # a labelled plan: flown by a policy, imitating its expert
             for k, a in enumerate(ref.actions):
                 if terminated or truncated:
                     raise ConfigError(
@@ -173,7 +174,11 @@ def demonstrations(
                 u = to_policy_action(env_action) if to_policy_action is not None else env_action
                 if k >= first:
                     obs_rows.append(np.asarray(obs, np.float32))
-                    act_rows.append(u)
+                    if labels is ref.actions:
+                        act_rows.append(u)
+                    else:
+                        lab: Any = int(labels[k]) if sampler == "primitive" else np.asarray(labels[k], np.float32)
+                        act_rows.append(to_policy_action(lab) if to_policy_action is not None else lab)
                     if soft_temperature > 0.0:
                         tried = ref.candidate_costs[k] if k < len(ref.candidate_costs) else []
                         t_rows.append(_soft_target(n_actions, int(u), tried, soft_temperature))
@@ -183,7 +188,9 @@ def demonstrations(
                 times.append(float(info["time"]))
         finally:
             env.close()
-        if getattr(env.unwrapped, "has_goal", True):
+        if ref.labels:  # a policy's episode, wherever it ended: replayed to its last step is enough
+            ok, what = terminated or truncated, "end at its last step"
+        elif getattr(env.unwrapped, "has_goal", True):
             ok, what = terminated and bool(info.get("is_success")), "reach the goal"
         else:  # the thermal climb: a plan flies to the time limit
             ok, what = truncated and not terminated, "fly to the time limit"
@@ -523,6 +530,7 @@ def controller_plan(
     agent: Any,
     scenario: Scenario,
     prefix: Sequence[Any] = (),
+    policy: Any = None,
 ) -> dict[str, Any]:
     """A hand-written controller's episode as a plan: ``prefix`` flown first (a DAgger start: a
     policy's actions), the controller shadowing it -- it sees every observation, so its memory
@@ -530,19 +538,31 @@ def controller_plan(
     the controller acting to the end. The demonstrator of the tasks a reference search cannot
     teach, such as the thermal climb on sensed lift (the search knows where the thermals are).
 
+    With ``policy`` the policy flies the whole episode instead and the shadowing controller labels
+    every state it visits (DAgger's expert queried along the learner's own path, Ross, Gordon &
+    Bagnell 2011): ``labels`` holds the controller's action at each step, ``actions`` the policy's.
+
     :param make_env: the raw env of the task, starting in the given scenario at its first reset.
     :param agent: ``reset(env, seed)`` and ``predict(obs) -> (env action, state)``, e.g.
         :class:`baselines.agents.ThermallingAgent`.
     :param prefix: env actions flown before the controller takes over.
-    :returns: ``actions`` (the prefix's, then the controller's, as lists), ``demo_from`` (the
+    :param policy: an agent as ``agent`` (e.g. :class:`baselines.agents.PPOAgent`) that flies
+        every step; only without ``prefix``.
+    :returns: ``actions`` (the prefix's, then the controller's, as lists), ``labels`` (with
+        ``policy``: the controller's actions, one per step; else empty), ``demo_from`` (the
         prefix's length), ``energy_spent`` [J/kg], ``flight_time`` [s], ``terminated`` (ended by
-        a crash, the domain's edge or a stall: not a plan to imitate) and ``truncated``.
+        a crash, the domain's edge or a stall) and ``truncated``.
     """
+    if policy is not None and len(prefix):
+        raise ConfigError("controller_plan: a prefix or a policy that flies the whole episode, not both")
     env = make_env(scenario)
     try:
         obs, _ = env.reset(seed=0)
         agent.reset(env, 0)
+        if policy is not None:
+            policy.reset(env, 0)
         actions: list[Any] = []
+        labels: list[Any] = []
         terminated = truncated = False
         info: dict[str, Any] = {"energy_spent": 0.0, "time": 0.0}
         for a in prefix:
@@ -553,12 +573,16 @@ def controller_plan(
                 break
         while not (terminated or truncated):
             a, _ = agent.predict(obs)
+            if policy is not None:
+                labels.append(np.asarray(a).tolist())
+                a, _ = policy.predict(obs)
             actions.append(np.asarray(a).tolist())
             obs, _, terminated, truncated, info = env.step(a)
     finally:
         env.close()
     return {
         "actions": actions,
+        "labels": labels,
         "demo_from": len(prefix),
         "energy_spent": float(info["energy_spent"]),
         "flight_time": float(info["time"]),

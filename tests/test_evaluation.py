@@ -15,7 +15,15 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 import soaring_env  # noqa: F401  (registers the envs)
-from baselines.agents import Agent, HeuristicAgent, RandomAgent, SSTPlannerAgent, ThermallingAgent, action_mask_of
+from baselines.agents import (
+    Agent,
+    HeuristicAgent,
+    RandomAgent,
+    SSTPlannerAgent,
+    ThermallingAgent,
+    action_mask_of,
+    flattest_glide,
+)
 from baselines.evaluation import (
     AGENT_NAMES,
     CONTINUOUS_ID,
@@ -296,6 +304,37 @@ def test_thermalling_agent_finds_and_works_the_core_in_wind() -> None:
     assert float(base.state[3]) > h0 + 300.0
 
 
+def test_thermalling_circles_the_way_a_shadowed_policy_turns() -> None:
+    """Shadowing a policy that circles the other way round (a DAgger round), the controller takes
+    that way from the flown path instead of commanding the circle reversed; flying itself, every
+    circling edge turns its own way round, so its own episodes are unchanged by that rule."""
+    env, _ = _climb_on_a_thermal()
+    own = ThermallingAgent()
+    own.reset(env, 0)
+    actions, entered = [], None
+    for k in range(30):
+        action, _ = own.predict(None)
+        if own._circling:
+            entered = k if entered is None else entered
+            turned = own._edge_turn()
+            assert k == entered or np.sign(turned) == own._side  # the path turns its own way round
+        actions.append(action)
+        env.step(action)
+    assert entered is not None and entered < 10
+    side = own._side
+    env.reset(seed=0)
+    shadow = ThermallingAgent()
+    shadow.reset(env, 0)
+    mirrored = [np.array([a[0], -a[1], a[2]], dtype=np.float32) for a in actions[entered + 1 : entered + 4]]
+    flown = actions[: entered + 1] + mirrored  # it enters as itself, then the policy circles the other way
+    for action in flown:
+        shadow.predict(None)
+        env.step(action)
+    action, _ = shadow.predict(None)
+    assert shadow._circling and shadow._side == -side
+    assert np.sign(action[1]) == -side
+
+
 def test_thermalling_search_spiral_turns_one_way() -> None:
     """Without lift the search follows its spiral by pure pursuit two steps ahead: every turn after
     the first step goes the same way round (aiming one step ahead zigzagged)."""
@@ -313,12 +352,14 @@ def test_thermalling_search_spiral_turns_one_way() -> None:
 
 
 def test_thermalling_arm_search_is_a_function_of_the_position() -> None:
-    """``search="arm"`` takes the spiral's phase from the aircraft's position: an agent that has
-    searched for 20 steps and a fresh one commands the same from the same state, where the
-    default spiral (its own phase) does not; the arm search also turns one way; bad values raise."""
-    env, _ = _climb_on_a_thermal(offset=2500.0)  # nothing within reach
+    """``search="arm"`` takes the spiral's phase from the aircraft's position, ``search="time"``
+    its radius from the flight time: an agent that has searched for 20 steps and a fresh one
+    command the same from the same state, where the default spiral (its own phase) does not; all
+    turn one way; the time search flies out at the radius r = sqrt(spacing v t / pi) within one
+    spacing; bad values raise."""
+    env, sc = _climb_on_a_thermal(offset=2500.0)  # nothing within reach
     commands = {}
-    for search in ("spiral", "arm"):
+    for search in ("spiral", "arm", "time"):
         env.reset(seed=0)
         flown = ThermallingAgent(search=search)
         flown.reset(env, 0)
@@ -331,7 +372,13 @@ def test_thermalling_arm_search_is_a_function_of_the_position() -> None:
         fresh.reset(env, 0)
         commands[search] = (flown.intent(), fresh.intent())
         assert len({float(np.sign(t)) for t in turns[2:] if abs(t) > 1e-6}) == 1
-    assert commands["arm"][0] == commands["arm"][1]
+        if search == "time":
+            base: Any = env.unwrapped
+            v = flattest_glide(base.model)[0]
+            r_t = math.sqrt(flown.search_spacing * v * float(base.time) / math.pi)
+            r = math.hypot(float(base.state[0]) - sc.start[0], float(base.state[1]) - sc.start[1])
+            assert abs(r - r_t) < flown.search_spacing, (r, r_t)
+    assert commands["arm"][0] == commands["arm"][1] and commands["time"][0] == commands["time"][1]
     assert commands["spiral"][0] != commands["spiral"][1]
     assert ThermallingAgent(search="arm").settings()["search"] == "arm"
     assert "search" not in ThermallingAgent().settings()  # the default's records stay current
@@ -373,6 +420,21 @@ def test_thermalling_sensor_noise_is_seeded_and_single_peaks_do_not_enter() -> N
     assert exact._smoothed(spike).max() < exact.enter_lift
     assert ThermallingAgent(entry_samples=1)._smoothed(spike).max() >= exact.enter_lift
     assert base.steps == 15
+
+
+def test_thermalling_entry_now_reads_the_lift_at_the_aircraft() -> None:
+    """``entry="now"`` decides entering on the edge's last sample alone, the lift at the aircraft: a
+    peak earlier on the edge does not enter (the default's smoothed edge does), lift where the
+    aircraft is does; the setting keys the records only when not the default; bad values raise."""
+    now, edge_rule = ThermallingAgent(entry="now"), ThermallingAgent()
+    edge = [(0.0, float(k), float(k), w) for k, w in enumerate([0.0, 0.5, 0.5, 0.5, 0.0])]
+    assert now._smoothed(edge).max() < now.enter_lift <= edge_rule._smoothed(edge).max()
+    edge[-1] = (0.0, 4.0, 4.0, 0.3)
+    assert now._smoothed(edge).max() >= now.enter_lift
+    assert now.settings()["entry"] == "now" and "entry" not in edge_rule.settings()
+    for bad in ("peak", 0):
+        with pytest.raises(ConfigError, match="entry"):
+            ThermallingAgent(entry=bad)  # type: ignore[arg-type]
 
 
 def test_thermalling_settings_key_the_records() -> None:

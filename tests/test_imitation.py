@@ -942,8 +942,10 @@ def test_climb_demos_are_the_controllers_episodes_and_a_dagger_round_shadows_the
     bit for bit, to the time limit, through the sensed tier with sample positions; a rerun skips
     them; a clone of them flies a DAgger round whose plans keep the clone's steps as a prefix
     (``demo_from``) and the controller's after it -- those of a controller that saw the prefix
-    fly; a plan that ends early is refused by the cloning."""
-    from baselines.agents import ThermallingAgent
+    fly; with ``--shadow`` the clone flies the whole episode and the plan's ``labels`` (the
+    controller's actions at the clone's states) are what the cloning imitates there; a plan that
+    ends early is refused by the cloning, labels of another length by the loading."""
+    from baselines.agents import PPOAgent, ThermallingAgent
     from baselines.cli.demos import main
     from baselines.imitation import controller_plan
 
@@ -997,6 +999,45 @@ def test_climb_demos_are_the_controllers_episodes_and_a_dagger_round_shadows_the
         out, lambda sc: make_eval_env(climb, [sc], {**sensed, "time_limit": 60}), sampler="continuous", gamma=0.99
     )
     assert len(demos) == 12 + 12 + 7 + 2  # two base plans, the DAgger plans from step 5 and 10 on
+    # --shadow: the clone flies the whole episode, the controller labels every state it visits
+    assert main(["--scenarios", "1", "--dagger", str(run), "--shadow", "--tag", "s1", *own_env]) == 0
+    labelled = load_reference(out / "climb-20000-s1.json").samplers["continuous"]
+    assert labelled.settings["shadow"] is True and "every" not in labelled.settings and labelled.demo_from == 0
+    flown = controller_plan(
+        lambda sc: gym.make(climb, time_limit=60, **sensed, scenario=sc),
+        ThermallingAgent(),
+        get_scenario("climb-20000"),
+        policy=PPOAgent(run),
+    )
+    assert flown["actions"] == labelled.actions and flown["labels"] == labelled.labels
+    assert len(labelled.labels) == len(labelled.actions) == 12 and labelled.labels != labelled.actions
+    rows = demonstrations(
+        out,
+        lambda sc: make_eval_env(climb, [sc], {**sensed, "time_limit": 60}),
+        sampler="continuous",
+        gamma=0.99,
+        match="climb-20000-s1",
+    )
+    assert np.array_equal(rows.actions, np.asarray(labelled.labels, np.float32))  # the controller's, imitated
+    env = make_eval_env(climb, [get_scenario("climb-20000")], {**sensed, "time_limit": 60})  # the clone's states
+    obs, _ = env.reset(seed=0)
+    for k, a in enumerate(labelled.actions):
+        assert np.array_equal(rows.observations[k], np.asarray(obs, np.float32))
+        obs, *_ = env.step(np.asarray(a, np.float32))
+    bad_labels = dataclasses.replace(labelled, labels=labelled.labels[:-1])
+    path = tmp_path / "bad-labels.json"
+    save_reference(ScenarioReference(get_scenario("climb-20000"), math.nan, {"continuous": bad_labels}), path)
+    with pytest.raises(ConfigError, match="labels must hold one action per step"):
+        load_reference(path)
+    for bad in (
+        ["--shadow", "--tag", "s2", *own_env],  # no --dagger
+        ["--shadow", "--dagger", str(run), *own_env],  # no --tag
+        ["--shadow", "--dagger", str(run), "--tag", "s2", "--every", "3", *own_env],
+        ["--shadow", "--dagger", str(run), "--tag", "s2", "--task", "goal", "--out", str(out)],
+    ):
+        with pytest.raises(SystemExit) as exc:
+            main(["--scenarios", "1", *bad])
+        assert exc.value.code == 2 and "--shadow" in capsys.readouterr().err
     short = dataclasses.replace(dagger, actions=dagger.actions[:8])  # ends before the time limit
     save_reference(ScenarioReference(get_scenario("climb-20000"), math.nan, {"continuous": short}), out / "short.json")
     with pytest.raises(ConfigError, match="does not fly to the time limit"):

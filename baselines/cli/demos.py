@@ -24,6 +24,9 @@ the states a trained policy visits.
     python scripts/demos.py --task climb --scenarios 400 --out results/demos-climb
     python scripts/demos.py --task climb --scenarios 200 --dagger results/ppo-climb-clone/c1/continuous --every 6 \
         --tag p1 --out results/demos-climb
+    # ... or the run's policy flying every episode to its end, the controller labelling each step
+    python scripts/demos.py --task climb --scenarios 400 --dagger results/ppo-climb-clone/c1/continuous --shadow \
+        --tag s1 --out results/demos-climb
     # goal reaching at Ts = 10 s on the physical envelope: the goal env's own search in that env
     python scripts/demos.py --scenarios 600 --out results/reference-train-ts10 \
         --env-kwargs '{"duration": 10, "envelope": "physical", "n_points": 10, "max_steps": 120, "time_limit": 1200}'
@@ -41,6 +44,7 @@ policy had there (``demo_from`` marks where the imitated part begins).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
@@ -98,7 +102,14 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument("--dagger", default=None, metavar="RUN", help="plan from the states this PPO run visits")
     p.add_argument("--ppo-model", choices=PPO_MODELS, default="final", help="which model of RUN")
-    p.add_argument("--every", type=int, default=4, help="with --dagger: every this many steps (default 4)")
+    p.add_argument("--every", type=int, default=None, help="with --dagger: every this many steps (default 4)")
+    p.add_argument(
+        "--shadow",
+        action="store_true",
+        help="--task climb with --dagger: the run's policy flies every episode to its end and the shadowing "
+        "controller labels each step (one plan <name>-<tag> per scenario) instead of taking over at every "
+        "--every-th step",
+    )
     p.add_argument(
         "--until", type=int, default=None, help="with --dagger: only states within the first this many steps"
     )
@@ -157,6 +168,10 @@ def main(argv: list[str] | None = None) -> int:
     check_cli_args(p, args, counts=("scenarios", "beam_width", "every", "until", "workers"), dirs=("out",))
     if args.first < 0:
         p.error(f"--first={args.first} must be >= 0")
+    if args.shadow and (args.task != "climb" or args.dagger is None or args.every is not None or not args.tag):
+        p.error("--shadow goes with --task climb, --dagger RUN and a --tag, without --every (every step is labelled)")
+    if args.every is None:
+        args.every = 4
     if not args.tag.isalnum() and args.tag != "":
         p.error(f"--tag={args.tag!r}: letters and digits only")
     env_kwargs = _env_kwargs(p, args.env_kwargs)
@@ -335,8 +350,8 @@ def _controller_demos(args: argparse.Namespace, env_kwargs: dict[str, Any] | Non
     ground or outside the domain are counted, not written. ``controller``: the controller's keywords
     (``--controller-kwargs``), recorded with its settings in every plan."""
     from baselines._runs import progress_bar
-    from baselines.agents import ThermallingAgent
-    from baselines.evaluation import make_env
+    from baselines.agents import PPOAgent, ThermallingAgent
+    from baselines.evaluation import make_env, ppo_model_path
     from baselines.imitation import controller_plan
     from baselines.reference import ScenarioReference, save_reference
     from baselines.reference.yardstick import load_reference
@@ -344,9 +359,14 @@ def _controller_demos(args: argparse.Namespace, env_kwargs: dict[str, Any] | Non
     task_id, family, _, _ = DEMO_TASKS["climb"]
     scenarios = [get_scenario(f"{family}-{DEMO_SEED0 + args.first + k}") for k in range(args.scenarios)]
     prefixes: dict[str, list] = {}
+    policy: PPOAgent | None = None
     if args.dagger is not None:
         env_kwargs = _run_env_kwargs(args.dagger, args.ppo_model, env_kwargs)
-        scenarios, prefixes = _dagger_starts(args, scenarios, task=True)
+        if args.shadow:
+            policy = PPOAgent(ppo_model_path(args.dagger, args.ppo_model))
+            scenarios = [dataclasses.replace(sc, name=f"{sc.name}-{args.tag}") for sc in scenarios]
+        else:
+            scenarios, prefixes = _dagger_starts(args, scenarios, task=True)
     kwargs = dict(env_kwargs or {})
     try:
         demonstrator = ThermallingAgent(**controller)
@@ -354,7 +374,8 @@ def _controller_demos(args: argparse.Namespace, env_kwargs: dict[str, Any] | Non
         raise ConfigError(f"--controller-kwargs={controller!r}: {exc}") from None
     settings: dict[str, Any] = {"demonstrator": "thermalling", **demonstrator.settings()}
     if args.dagger is not None:
-        settings |= {"dagger": str(args.dagger), "ppo_model": args.ppo_model, "every": args.every}
+        how = {"shadow": True} if args.shadow else {"every": args.every}
+        settings |= {"dagger": str(args.dagger), "ppo_model": args.ppo_model, **how}
     if kwargs:
         settings["env_kwargs"] = kwargs
     args.out.mkdir(parents=True, exist_ok=True)
@@ -379,18 +400,21 @@ def _controller_demos(args: argparse.Namespace, env_kwargs: dict[str, Any] | Non
             ThermallingAgent(**controller),
             sc,
             prefixes.get(sc.name, ()),
+            policy,
         )
-        if plan["terminated"]:
-            ended += 1
-        else:
-            ref = _flown_plan(plan, settings, time.perf_counter() - t1, demo_from=plan["demo_from"])
+        ended += plan["terminated"]
+        if policy is not None or not plan["terminated"]:  # a policy's crash is labelled too: "pull up"
+            ref = _flown_plan(
+                plan, settings, time.perf_counter() - t1, demo_from=plan["demo_from"], labels=plan["labels"]
+            )
             save_reference(ScenarioReference(sc, math.nan, {"continuous": ref}), args.out / f"{sc.name}.json")
             written += 1
         if bar is not None:
             bar.update(1)
     if bar is not None:
         bar.close()
-    print(f"{written} plans written, {ended} episodes ended early (not written), in {time.perf_counter() - t0:.0f} s "
+    kept = " (written: labelled)" if policy is not None else " (not written)"
+    print(f"{written} plans written, {ended} episodes ended early{kept}, in {time.perf_counter() - t0:.0f} s "
           f"-> {args.out}", flush=True)  # fmt: skip
     return 0
 

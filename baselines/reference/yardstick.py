@@ -61,6 +61,10 @@ class SamplerReference:
         per step of ``actions`` the ``[action, energy]`` pairs of the actions tried there, each
         followed by the policy's mode to the end [J/kg] (None: that episode missed the goal); empty
         lists where nothing was tried, and an empty list for a searched plan.
+    :param labels: a labelled plan (DAgger with a shadowing expert,
+        :func:`baselines.imitation.controller_plan`): per step of ``actions`` -- here the policy's,
+        flown to reach the states -- the expert's action there, which a cloning imitates; empty: the
+        plan imitates its own ``actions``.
     """
 
     best_cost: float
@@ -74,17 +78,19 @@ class SamplerReference:
     demo_from: int = 0
     env_kwargs: dict[str, Any] = dataclasses.field(default_factory=dict)
     candidate_costs: list[list[list[Any]]] = dataclasses.field(default_factory=list)
+    labels: list[Any] = dataclasses.field(default_factory=list)
 
     def regret(self, cost: float) -> float:
         return regret(cost, self.best_cost, self.direct_cost)
 
 
 def _sampler_dict(ref: SamplerReference) -> dict[str, Any]:
-    """``ref`` as JSON-ready data; ``candidate_costs`` only where there are some (searched plans'
-    files stay as they were before the field existed)."""
+    """``ref`` as JSON-ready data; ``candidate_costs`` and ``labels`` only where there are some
+    (searched plans' files stay as they were before the fields existed)."""
     d = dataclasses.asdict(ref)
-    if not d["candidate_costs"]:
-        del d["candidate_costs"]
+    for optional in ("candidate_costs", "labels"):
+        if not d[optional]:
+            del d[optional]
     return d
 
 
@@ -113,6 +119,11 @@ def _sampler_from_dict(v: Mapping[str, Any], source: str) -> SamplerReference:
         raise ConfigError(
             f"{source}: candidate_costs must hold, per step of its {len(ref.actions)} actions, a list of "
             f"[action (integer 0 ... {N_PRIMITIVES - 1}), energy (number or null)] pairs; got {str(cc)[:80]!r}"
+        )
+    if ref.labels and not (isinstance(ref.labels, list) and len(ref.labels) == len(ref.actions)):
+        raise ConfigError(
+            f"{source}: labels must hold one action per step of its {len(ref.actions)} actions; "
+            f"got {str(ref.labels)[:80]!r}"
         )
     return ref
 
