@@ -620,10 +620,11 @@ class ThermallingAgent(HeuristicAgent):
         edge = self._last_edge()
         self._tabu = [(n, e, until) for n, e, until in self._tabu if until > t]
         turned = self._edge_turn() if edge else 0.0  # [rad]
+        # the way round the aircraft circles, where it does: its own, or a shadowed policy's
+        way = math.copysign(1.0, turned) if abs(turned) >= ADOPT_RATE * self._step_duration() else None
         if self._circling:
             self._log.extend(edge)
-            if abs(turned) >= ADOPT_RATE * self._step_duration():  # the way the aircraft turns (a shadowed policy's)
-                self._side = math.copysign(1.0, turned)
+            self._side = way or self._side
             recent = [w for (_, _, tw, w) in self._log if tw >= t - max(self.exit_window, self._step_duration())]
             weak = t - self._entered >= self.min_circle and recent and float(np.mean(recent)) < self.exit_lift
             if not self.climb_useful() or weak:
@@ -641,9 +642,7 @@ class ThermallingAgent(HeuristicAgent):
                 k = int(np.argmax(smooth)) + (len(edge) - len(smooth)) // 2  # the average's middle sample
                 dn, de = edge[k][0] - edge[0][0], edge[k][1] - edge[0][1]
                 cross = math.cos(chi) * de - math.sin(chi) * dn  # > 0: the strongest point lies right
-                self._side = 1.0 if cross >= 0.0 else -1.0
-                if abs(turned) >= ADOPT_RATE * self._step_duration():  # a shadowed policy circling: its way round
-                    self._side = math.copysign(1.0, turned)
+                self._side = way or (1.0 if cross >= 0.0 else -1.0)
         if not self._circling:
             return self.cruise()
         return self._orbit(model, pn, pe, chi)

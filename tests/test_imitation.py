@@ -1010,6 +1010,9 @@ def test_climb_demos_are_the_controllers_episodes_and_a_dagger_round_shadows_the
         policy=PPOAgent(run),
     )
     assert flown["actions"] == labelled.actions and flown["labels"] == labelled.labels
+    with pytest.raises(ConfigError, match="not both"):
+        controller_plan(lambda sc: gym.make(climb, scenario=sc), ThermallingAgent(), get_scenario("climb-20000"),
+                        labelled.actions[:2], PPOAgent(run))  # fmt: skip
     assert len(labelled.labels) == len(labelled.actions) == 12 and labelled.labels != labelled.actions
     rows = demonstrations(
         out,

@@ -347,7 +347,9 @@ def _controller_demos(args: argparse.Namespace, env_kwargs: dict[str, Any] | Non
     shadowing the run's steps there (:func:`baselines.imitation.controller_plan`); each episode
     that flies to the time limit becomes a plan file in the reference format (one per scenario,
     atomically; a rerun skips files with the same settings). Episodes the controller ends on the
-    ground or outside the domain are counted, not written. ``controller``: the controller's keywords
+    ground or outside the domain are counted, not written. With ``--shadow`` the run's policy flies
+    each scenario to its end instead and the controller labels every step (the plan's ``labels``;
+    written however the episode ends). ``controller``: the controller's keywords
     (``--controller-kwargs``), recorded with its settings in every plan."""
     from baselines._runs import progress_bar
     from baselines.agents import PPOAgent, ThermallingAgent
