@@ -163,22 +163,17 @@ def demonstrations(
             info: dict[str, Any] = {}
             terminated = truncated = False
             first = int(ref.demo_from)  # a DAgger plan: the policy's own steps first, not imitated
-            labels = ref.labels or ref.actions  # a labelled plan: flown by a policy, imitating its expert
             for k, a in enumerate(ref.actions):
                 if terminated or truncated:
                     raise ConfigError(
                         f"demos: the {sampler} plan of {name!r} ends after {k} of {len(ref.actions)} steps "
                         "when replayed: the env's dynamics differ from the reference search's"
                     )
-                env_action: Any = int(a) if sampler == "primitive" else np.asarray(a, np.float32)
-                u = to_policy_action(env_action) if to_policy_action is not None else env_action
+                u = _policy_action(a, sampler, to_policy_action)
                 if k >= first:
                     obs_rows.append(np.asarray(obs, np.float32))
-                    if labels is ref.actions:
-                        act_rows.append(u)
-                    else:
-                        lab: Any = int(labels[k]) if sampler == "primitive" else np.asarray(labels[k], np.float32)
-                        act_rows.append(to_policy_action(lab) if to_policy_action is not None else lab)
+                    # a labelled plan: flown by a policy, imitating its expert's action there
+                    act_rows.append(_policy_action(ref.labels[k], sampler, to_policy_action) if ref.labels else u)
                     if soft_temperature > 0.0:
                         tried = ref.candidate_costs[k] if k < len(ref.candidate_costs) else []
                         t_rows.append(_soft_target(n_actions, int(u), tried, soft_temperature))
@@ -232,6 +227,12 @@ def demonstrations(
         costs_to_go=np.concatenate(q_rows).astype(np.float32),
         targets=np.stack(t_rows) if t_rows else None,
     )
+
+
+def _policy_action(a: Any, sampler: str, to_policy_action: Callable[[Any], Any] | None) -> Any:
+    """A plan's env action (a primitive index or a control triple) as the learner's action."""
+    env_action: Any = int(a) if sampler == "primitive" else np.asarray(a, np.float32)
+    return to_policy_action(env_action) if to_policy_action is not None else env_action
 
 
 def _soft_target(n_actions: int, action: int, tried: Sequence[Sequence[Any]], temperature: float) -> np.ndarray:
