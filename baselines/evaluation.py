@@ -279,7 +279,7 @@ def agent_spec(name: str, config: EvalConfig) -> AgentSpec:
     env_id = CONTINUOUS_ID if name.endswith("-continuous") else DISCRETE_ID
     if name.startswith("thermalling"):
         return AgentSpec(name, env_id, lambda: ThermallingAgent(name=name), ThermallingAgent().settings())
-    return AgentSpec(name, env_id, lambda: HeuristicAgent(name=name), {"rule": "v1"})
+    return AgentSpec(name, env_id, lambda: HeuristicAgent(name=name), HeuristicAgent().settings())
 
 
 # --- running -------------------------------------------------------------------------------------------

@@ -109,6 +109,8 @@ class TaskJob:
             return json.loads(json.dumps(settings))  # as a results file holds it (tuples as lists)
         if self.agent == "thermalling":  # the rule's version and settings: a changed rule flies again
             return {"record_version": RECORD_VERSION, **ThermallingAgent().settings()}
+        if self.agent in ("heuristic", "direct"):  # the rule's version: a changed rule flies again
+            return {"record_version": RECORD_VERSION, **HeuristicAgent().settings()}
         return {"record_version": RECORD_VERSION}
 
 

@@ -192,6 +192,86 @@ def test_heuristic_circles_in_lift() -> None:
     assert "spiral" in env.unwrapped.model.library.describe(int(action))
 
 
+def _still_air(start_height: float, wind_north: float = 0.0) -> Any:
+    """The paper scenario without its thermals (3 km to the goal at 300 m, radius 150 m), from ``start_height``."""
+    from soaring_env.physics import WindField
+
+    sc = resolve_scenario("paper")
+    field = WindField(zi=sc.field.zi, wind_north=wind_north)
+    return sc.replace(field=field, start=(0.0, 0.0, 0.0, start_height))
+
+
+def test_heuristic_glides_at_zero_thrust_where_the_glide_reaches() -> None:
+    """From 400 m the flattest glide reaches the goal region 3 km away: the continuous heuristic flies
+    it at the best-L/D airspeed without the motor and without a speed change, so every edge costs
+    exactly the height it loses, g dh."""
+    env = gym.make(CONTINUOUS_ID)
+    obs, _ = env.reset(seed=0, options={"scenario": _still_air(400.0)})
+    agent = HeuristicAgent()
+    agent.reset(env, 0)
+    v_best, glide = flattest_glide(env.unwrapped.model)
+    done, steps, info = False, 0, {}
+    while not done:
+        v, turn, gamma = agent.intent()
+        assert (v, turn, gamma) == (v_best, 0.0, glide)
+        obs, _, terminated, truncated, info = env.step(agent.predict(obs)[0])
+        done, steps = terminated or truncated, steps + 1
+        assert info["fuel"] == 0.0 and info["kinetic"] == 0.0
+        assert info["edge_cost"] == pytest.approx(info["potential"], rel=1e-12)
+    assert info["is_success"] and steps == 7  # 3 km less the region's radius at 15.5 m/s, 30 s a step
+
+
+@pytest.mark.parametrize("env_id", [DISCRETE_ID, CONTINUOUS_ID])
+def test_heuristic_arrives_low_where_the_motor_must_help(env_id: str) -> None:
+    """From 200 m, below the region (150-450 m) less the glide's loss, the motor has to help: the rule
+    aims at the region's lower part (a metre climbed under power costs 1 / eta of its potential
+    energy) and never higher than the start, and it spends less than the v1 rule's fast cruise to
+    the upper half did (2.3-2.8 kJ/kg on the paper scenario)."""
+    env = gym.make(env_id)
+    rec = run_episode(env, HeuristicAgent(), _still_air(200.0), seed=0)
+    assert rec["success"]
+    assert 150.0 < rec["final_height"] <= 200.0 + 1e-6
+    assert rec["energy_spent"] < 2_000.0
+
+
+def test_heuristic_climbs_only_to_the_glide_into_the_goal() -> None:
+    """:meth:`HeuristicAgent.climb_useful` in closed form: a climb pays below the height from which
+    the cruise reaches the region's top (goal height + ARRIVE x radius) -- at the flattest glide on
+    the continuous env, level on the primitives -- and not above it."""
+    from baselines.agents import ARRIVE
+
+    for env_id in (DISCRETE_ID, CONTINUOUS_ID):
+        env = gym.make(env_id)
+        model_env: Any = env.unwrapped
+        env.reset(seed=0, options={"scenario": _still_air(300.0)})
+        slope = 0.0 if env_id == DISCRETE_ID else -math.tan(flattest_glide(model_env.model)[1])
+        need = 300.0 + ARRIVE * 150.0 + slope * (3000.0 - 150.0)
+        for h, useful in ((need - 1.0, True), (need + 1.0, False)):
+            env.reset(seed=0, options={"scenario": _still_air(h)})
+            agent = HeuristicAgent()
+            agent.reset(env, 0)
+            assert agent.climb_useful() is useful, (env_id, h, need)
+
+
+@pytest.mark.parametrize("wind", [-6.0, 6.0])
+def test_heuristic_flies_faster_into_a_headwind(wind: float) -> None:
+    """The speed to fly: into a headwind faster than the best-L/D airspeed (each second in the air
+    costs more ground), with a tailwind slower."""
+    env = gym.make(CONTINUOUS_ID)
+    env.reset(seed=0, options={"scenario": _still_air(400.0, wind_north=wind)})  # the goal lies north
+    agent = HeuristicAgent()
+    agent.reset(env, 0)
+    v, _, _ = agent.cruise()
+    v_still = flattest_glide(env.unwrapped.model)[0]
+    assert (v > v_still) if wind < 0 else (v < v_still)
+
+
+def test_heuristic_settings_key_the_records() -> None:
+    """The heuristic's records are keyed by its rule's version, the thermalling agent's by its cruise's too."""
+    assert HeuristicAgent().settings() == {"rule": HeuristicAgent.RULE}
+    assert ThermallingAgent().settings()["cruise"] == HeuristicAgent.RULE
+
+
 def _climb_on_a_thermal(offset: float = 40.0, wind_north: float = 0.0) -> tuple[gym.Env, Any]:
     """The thermal-climb env on a scenario with one thermal ``offset`` m north of the start."""
     from soaring_env.physics import Thermal, WindField
