@@ -40,6 +40,7 @@ from soaring_env._validation import (
     check_range,
     check_type,
 )
+from soaring_env.physics import glide_height_loss
 from soaring_env.primitives import COL_AIRSPEED, COL_CHI_DOT_1, COL_CHI_DOT_2, COL_FAMILY, COL_GAMMA, SPIRAL
 
 __all__ = [
@@ -230,9 +231,9 @@ class HeuristicAgent:
     def climb_useful(self) -> bool:
         """Whether gaining height is still worth a circle: below ``ceiling`` of the boundary-layer
         depth and 150 m under the domain top, and (with a goal) outside the goal region and lower
-        than the height from which the cruise glides to the region's top (at the flattest glide;
-        on the primitives, which glide no shallower than -15 deg, level): height beyond it is lost
-        again before the goal."""
+        than the height from which the cruise glides to the region's top (at the speed to fly in
+        the wind; on the primitives, which glide no shallower than -15 deg, level): height beyond it
+        is lost again before the goal."""
         base: Any = self._require_env().unwrapped
         sc = base.scenario
         pn, pe, _, h = (float(v) for v in np.asarray(base.state, dtype=np.float64)[:4])
@@ -246,8 +247,8 @@ class HeuristicAgent:
             return False
         if isinstance(self._require_env().action_space, gym.spaces.Discrete):
             slope = 0.0
-        else:
-            slope = -math.tan(flattest_glide(base.model)[1])
+        else:  # the cruise's glide: its speed to fly in the wind on the goal's bearing
+            slope = self._speed_to_fly(base.model, math.atan2(goal.east - pe, goal.north - pn))[2]
         return h < goal.height + ARRIVE * goal.radius + slope * (dist - goal.radius)
 
     def cruise(self) -> tuple[float, float, float]:
@@ -302,16 +303,17 @@ class HeuristicAgent:
         airspeed that loses least height per metre over the ground on ``bearing`` [rad] in the
         wind (a pilot's speed to fly in still air, without a climb rate to wait for): among the
         envelope's straight glides (:meth:`~soaring_env.model.SoaringModel.straight_glides`), or
-        on the primitives among their airspeeds; ``slowest``: the slowest of them."""
+        on the primitives among their airspeeds (:func:`~soaring_env.physics.glide_height_loss`;
+        inf per metre where none makes headway); ``slowest``: the slowest of them."""
         sc = cast(Any, self._require_env().unwrapped).scenario
         if isinstance(self._require_env().action_space, gym.spaces.Discrete):
             speeds = np.unique(model.library.table[:, COL_AIRSPEED])
             glides = model.aircraft.glide_angle(speeds, 0.0, sc.bounds.height_max)
         else:
             speeds, glides = model.straight_glides(21)
-        along = sc.field.wind_north * math.cos(bearing) + sc.field.wind_east * math.sin(bearing)
-        ground = np.maximum(speeds * np.cos(glides) + along, 1.0)  # ground speed along the track [m/s]
-        per_metre = np.tan(-glides) * speeds / ground
+        wn, we = sc.field.wind_north, sc.field.wind_east
+        along, cross = wn * math.cos(bearing) + we * math.sin(bearing), we * math.cos(bearing) - wn * math.sin(bearing)
+        per_metre = glide_height_loss(1.0, speeds, glides, along, cross)
         k = 0 if slowest else int(np.argmin(per_metre))
         return float(speeds[k]), float(glides[k]), float(per_metre[k])
 

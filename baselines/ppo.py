@@ -59,6 +59,7 @@ from soaring_env._validation import (
     check_bool,
     check_positive,
 )
+from soaring_env.physics import glide_height_loss
 from soaring_env.scenario import HELDOUT_SEED0, VALIDATION_SEED0, Scenario, atomic_write_text, get_scenario
 
 DISCRETE_ID = "soaring/Soaring-v0"
@@ -624,10 +625,7 @@ class FinalGlide:
         un, ue = np.where(d > 1e-9, gn / safe, 1.0), np.where(d > 1e-9, ge / safe, 0.0)
         wn, we = wn_ * self.wind_scale, we_ * self.wind_scale
         along, cross = wn * un + we * ue, -wn * ue + we * un
-        va = v * np.cos(g)  # horizontal airspeed
-        ground = np.sqrt(np.maximum(va**2 - cross[:, None] ** 2, 0.0)) + along[:, None]
-        ok = ground > 0.1
-        loss = np.where(ok, d[:, None] * (-v * np.sin(g)) / np.where(ok, ground, 1.0), np.inf).min(axis=1)
+        loss = glide_height_loss(d[:, None], v, g, along[:, None], cross[:, None]).min(axis=1)
         above = -up_ * self.height_scale  # height over the goal centre [m]
         reach = np.isfinite(loss)
         m = np.where(reach, (above - np.where(reach, loss, 0.0)) / self.height_scale, -self.BOUND)

@@ -600,3 +600,33 @@ def test_fast_pow_matches_pow(x: float, y: float) -> None:
     assume(1e-300 < exact < 1e300)
     assert _pow(x, y) == pytest.approx(exact, rel=4.0 * max(1.0, abs(y * math.log(x))) * 2.0**-53)
     assert _pow(0.0, y) == 0.0
+
+
+@settings(max_examples=50, deadline=None)
+@given(
+    v=st.floats(8.0, 25.0),
+    deg=st.floats(1.0, 20.0),
+    along=st.floats(-6.0, 6.0),
+    cross=st.floats(-6.0, 6.0),
+    dist=st.floats(1.0, 1e4),
+)
+def test_glide_height_loss_closed_form(v: float, deg: float, along: float, cross: float, dist: float) -> None:
+    """Sink rate over ground speed: in still air ``d tan|gamma|``; crabbing into a crosswind the
+    ground speed along the track is ``sqrt(va^2 - c^2) + w``; no headway: inf."""
+    from soaring_env.physics import glide_height_loss
+
+    g = -math.radians(deg)
+    still = float(glide_height_loss(dist, v, g, 0.0, 0.0))
+    assert still == pytest.approx(dist * math.tan(-g), rel=1e-12)
+    va = v * math.cos(g)
+    ground = math.sqrt(max(va * va - cross * cross, 0.0)) + along
+    got = float(glide_height_loss(dist, v, g, along, cross))
+    if ground > 0.1:
+        assert got == pytest.approx(dist * v * math.sin(-g) / ground, rel=1e-12)
+        if abs(ground - va) > 1e-6:  # a headwind or a crosswind costs height, a tailwind saves it
+            assert (got > still) == (ground < va)
+    else:
+        assert got == math.inf
+    # broadcast over airspeeds: one row per track
+    many = glide_height_loss(dist, np.array([v, v + 1.0]), np.array([g, g]), along, cross)
+    assert many.shape == (2,) and float(many[0]) == got

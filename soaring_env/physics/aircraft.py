@@ -212,6 +212,21 @@ def bank_angle(airspeed, chi_dot) -> np.ndarray:
     return np.arctan(np.asarray(airspeed, dtype=np.float64) * np.asarray(chi_dot, dtype=np.float64) / G)
 
 
+def glide_height_loss(distance, airspeed, angle, along, cross) -> np.ndarray:
+    """Height [m] a straight zero-thrust glide loses over ``distance`` [m] of ground track, at
+    ``airspeed`` [m/s] and path angle ``angle`` [rad] (< 0), with the wind ``along`` the track and
+    ``cross`` it [m/s] (crabbing into the crosswind); inf where the ground speed along the track is
+    not above 0.1 m/s. Arrays broadcast. What a final-glide computer shows, and the speed to fly
+    in still air: the airspeed of least loss.
+    """
+    v = np.asarray(airspeed, dtype=np.float64)
+    g = np.asarray(angle, dtype=np.float64)
+    va = v * np.cos(g)  # horizontal airspeed
+    ground = np.sqrt(np.maximum(va**2 - np.asarray(cross, dtype=np.float64) ** 2, 0.0)) + along
+    ok = ground > 0.1
+    return np.where(ok, distance * (-v * np.sin(g)) / np.where(ok, ground, 1.0), np.inf)
+
+
 # Indices into Aircraft.packed(); kept next to the kernels that read them.
 _AC_MASS, _AC_S, _AC_PIARE, _AC_CD0, _AC_CL0, _AC_ETA, _AC_MODEL = range(7)
 
