@@ -188,7 +188,7 @@ class HeuristicAgent:
     #: The rule's version, recorded with every result it flies (a changed rule flies again). v2
     #: (2026-12-08): the speed to fly, zero-thrust glides, arrival low under power and steering by
     #: the step's arc replaced v1's fast cruise to the region's upper half by pure pursuit (held-out
-    #: median regret 2.49 -> 1.12 on the primitives, 1.45 -> 1.00 continuous; README).
+    #: median regret 2.49 -> 1.07 on the primitives, 1.45 -> 1.00 continuous; README).
     RULE = "v2"
 
     def __init__(
