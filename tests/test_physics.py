@@ -630,3 +630,16 @@ def test_glide_height_loss_closed_form(v: float, deg: float, along: float, cross
     # broadcast over airspeeds: one row per track
     many = glide_height_loss(dist, np.array([v, v + 1.0]), np.array([g, g]), along, cross)
     assert many.shape == (2,) and float(many[0]) == got
+
+
+def test_glide_height_loss_refuses_bad_input() -> None:
+    """Strings and non-finite values are refused with a ConfigError naming the argument."""
+    from soaring_env import ConfigError
+    from soaring_env.physics import glide_height_loss
+
+    with pytest.raises(ConfigError, match="distance"):
+        glide_height_loss("far", 15.0, -0.05, 0.0, 0.0)
+    with pytest.raises(ConfigError, match="along"):
+        glide_height_loss(1.0, 15.0, -0.05, math.nan, 0.0)
+    with pytest.raises(ConfigError, match="airspeed"):
+        glide_height_loss(1.0, [15.0, math.inf], -0.05, 0.0, 0.0)

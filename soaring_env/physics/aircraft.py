@@ -22,7 +22,16 @@ from numba import njit
 
 from soaring_env._jit import ERROR_MODEL as _EM
 from soaring_env._jit import FASTMATH as _FM
-from soaring_env._validation import ConfigError, broadcast_flat, check_choice, check_positive, check_range, check_type
+from soaring_env._validation import (
+    ConfigError,
+    as_float_array,
+    broadcast_flat,
+    check_array_finite,
+    check_choice,
+    check_positive,
+    check_range,
+    check_type,
+)
 from soaring_env.physics.atmosphere import MAX_HEIGHT, G, _density, air_density
 
 THRUST_MODELS = ("trim", "paper")
@@ -218,13 +227,18 @@ def glide_height_loss(distance, airspeed, angle, along, cross) -> np.ndarray:
     ``cross`` it [m/s] (crabbing into the crosswind); inf where the ground speed along the track is
     not above 0.1 m/s. Arrays broadcast. What a final-glide computer shows, and the speed to fly
     in still air: the airspeed of least loss.
+
+    :raises ConfigError: naming the argument, for a value that is not a finite number.
     """
-    v = np.asarray(airspeed, dtype=np.float64)
-    g = np.asarray(angle, dtype=np.float64)
+    given = {"distance": distance, "airspeed": airspeed, "angle": angle, "along": along, "cross": cross}
+    arrays = {name: as_float_array(name, x) for name, x in given.items()}
+    for name, x in arrays.items():
+        check_array_finite(name, x)
+    d, v, g, w_along, w_cross = arrays.values()
     va = v * np.cos(g)  # horizontal airspeed
-    ground = np.sqrt(np.maximum(va**2 - np.asarray(cross, dtype=np.float64) ** 2, 0.0)) + along
+    ground = np.sqrt(np.maximum(va**2 - w_cross**2, 0.0)) + w_along
     ok = ground > 0.1
-    return np.where(ok, distance * (-v * np.sin(g)) / np.where(ok, ground, 1.0), np.inf)
+    return np.where(ok, d * (-v * np.sin(g)) / np.where(ok, ground, 1.0), np.inf)
 
 
 # Indices into Aircraft.packed(); kept next to the kernels that read them.
