@@ -679,7 +679,7 @@ class ThermallingAgent(HeuristicAgent):
         dn, de = goal.north - pn, goal.east - pe
         dist = math.hypot(dn, de)
         field = base.scenario.field
-        # closing speed: the cruise's airspeed near the goal (the slowest) plus the wind along the way
+        # closing speed: the slowest airspeed (the cruise flies at least as fast) plus the wind along the way
         along = (field.wind_north * dn + field.wind_east * de) / max(dist, 1e-9)
         closing = max(float(base.model.library.table[:, COL_AIRSPEED].min()) + along, 1.0)
         need = 1.5 * max(dist - goal.radius, 0.0) / closing + 2.0 * ts
